@@ -1,0 +1,28 @@
+// tofcam: command-line entry point.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <exception>
+
+#include "commands.h"
+#include "tofcam/core/error.h"
+#include "tofcam/version.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"tofcam: time-of-flight cameras for mobile robots"};
+  app.set_version_flag("--version", tofcam::kVersionString);
+  app.require_subcommand(1);
+  tofcam::cli::SetupInfoCommand(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const tofcam::Error& e) {
+    std::fprintf(stderr, "tofcam: error (%s): %s\n", std::string(ErrorCodeName(e.code())).c_str(),
+                 e.what());
+    return tofcam::ExitStatus(e.code());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tofcam: internal error: %s\n", e.what());
+    return tofcam::ExitStatus(tofcam::ErrorCode::kInternal);
+  }
+  return 0;
+}

@@ -1,0 +1,70 @@
+#pragma once
+/// \file
+/// The camera interface every frame source implements: the simulator (tofcam::sim), playback of
+/// recordings and importers (tofcam::io). Settings that a source cannot change throw
+/// Error(kUnsupported); out-of-range settings throw Error(kInvalidArgument) and leave the camera
+/// unchanged.
+
+#include <optional>
+#include <string>
+
+#include "tofcam/core/camera_intrinsics.h"
+#include "tofcam/core/frame.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+
+/// Static description of a camera.
+struct CameraInfo {
+  std::string model = "SR-2";           ///< Model name.
+  CameraIntrinsics intrinsics = CameraIntrinsics::SwissRangerSr2();
+  double modulation_frequency_hz = 20e6;  ///< Current modulation frequency, Hz.
+  double integration_time_step_us = 255.0;  ///< µs per integration-time register step.
+  double integration_time_base_us = 0.0;    ///< µs at register 0: time = base + register * step.
+  int min_integration_register = 1;
+  int max_integration_register = 255;
+  double max_frame_rate_hz = 30.0;      ///< Upper bound of the frame rate.
+  bool has_intensity = true;            ///< False for sources without an offset channel.
+  bool has_ground_truth = false;        ///< True for simulators.
+
+  [[nodiscard]] int width() const noexcept { return intrinsics.width; }
+  [[nodiscard]] int height() const noexcept { return intrinsics.height; }
+  /// L = c / (2 f_mod), metres.
+  [[nodiscard]] double unambiguous_range_m() const noexcept {
+    return UnambiguousRangeM(modulation_frequency_hz);
+  }
+  /// Integration time in µs of a register value.
+  [[nodiscard]] double IntegrationTimeUs(int reg) const noexcept {
+    return integration_time_base_us + reg * integration_time_step_us;
+  }
+};
+
+/// A continuous-wave ToF camera.
+class Camera {
+ public:
+  virtual ~Camera() = default;
+  Camera() = default;
+  Camera(const Camera&) = delete;
+  Camera& operator=(const Camera&) = delete;
+
+  /// The next frame, or nullopt at the end of a finite stream (a live camera never ends).
+  /// Throws Error on device or file failure.
+  [[nodiscard]] virtual std::optional<Frame> Grab() = 0;
+  [[nodiscard]] virtual const CameraInfo& Info() const = 0;
+
+  /// Integration-time register for the next frame; valid range
+  /// [Info().min_integration_register, Info().max_integration_register].
+  virtual void SetIntegrationTimeRegister(int reg) = 0;
+  [[nodiscard]] virtual int IntegrationTimeRegister() const = 0;
+  /// Modulation frequency in Hz; which values are valid depends on the model.
+  virtual void SetModulationFrequencyHz(double hz) = 0;
+  [[nodiscard]] double ModulationFrequencyHz() const { return Info().modulation_frequency_hz; }
+  /// Camera distance-offset register (added to the distance register modulo 2^16).
+  virtual void SetDistanceOffsetRegister(int reg) = 0;
+  [[nodiscard]] virtual int DistanceOffsetRegister() const = 0;
+  /// Pan-unit angle in radians (only for cameras on a pan unit).
+  virtual void SetPanAngleRad(double angle_rad) = 0;
+  [[nodiscard]] virtual double PanAngleRad() const = 0;
+};
+
+}  // namespace tofcam

@@ -1,0 +1,130 @@
+#include "tofcam/core/camera_intrinsics.h"
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <limits>
+
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+void RequireFinite(double value, const char* name) {
+  if (!std::isfinite(value)) {
+    throw Error(ErrorCode::kInvalidArgument, std::string("intrinsics: ") + name + " is not finite");
+  }
+}
+
+double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  // atan2 of |a x b| and a.b stays accurate for small and large angles alike.
+  return std::atan2(a.cross(b).norm(), a.dot(b));
+}
+
+}  // namespace
+
+CameraIntrinsics CameraIntrinsics::SwissRangerSr2() {
+  CameraIntrinsics k;
+  k.width = 160;
+  k.height = 124;
+  k.fx_px = 8.0e-3 / 39.2e-6;
+  k.fy_px = 8.0e-3 / 54.8e-6;
+  k.cx_px = (k.width - 1) / 2.0;
+  k.cy_px = (k.height - 1) / 2.0;
+  return k;
+}
+
+void CameraIntrinsics::Validate() const {
+  if (width <= 0 || height <= 0 || static_cast<long long>(width) * height > Image<float>::kMaxPixels) {
+    throw Error(ErrorCode::kInvalidArgument, "intrinsics: width and height must be > 0 and the image at most 2^28 pixels");
+  }
+  for (auto [v, n] : {std::pair{fx_px, "fx_px"}, {fy_px, "fy_px"}, {cx_px, "cx_px"},
+                      {cy_px, "cy_px"}, {k1, "k1"}, {k2, "k2"}, {k3, "k3"}, {k4, "k4"},
+                      {k5, "k5"}, {k6, "k6"}, {p1, "p1"}, {p2, "p2"}}) {
+    RequireFinite(v, n);
+  }
+  if (fx_px <= 0 || fy_px <= 0) {
+    throw Error(ErrorCode::kInvalidArgument, "intrinsics: focal lengths fx_px, fy_px must be > 0");
+  }
+  // Every pixel must map to a ray; a lens model that cannot be inverted at the corners is
+  // as unusable as a negative focal length.
+  for (double u : {-0.5, width - 0.5}) {
+    for (double v : {-0.5, height - 0.5}) {
+      if (!Unproject({u, v}).allFinite()) {
+        throw Error(ErrorCode::kInvalidArgument,
+                    "intrinsics: distortion cannot be inverted at the image corners");
+      }
+    }
+  }
+}
+
+bool CameraIntrinsics::HasDistortion() const noexcept {
+  return k1 != 0 || k2 != 0 || k3 != 0 || k4 != 0 || k5 != 0 || k6 != 0 || p1 != 0 || p2 != 0;
+}
+
+Eigen::Vector2d CameraIntrinsics::Distort(const Eigen::Vector2d& n) const noexcept {
+  const double x = n.x(), y = n.y();
+  const double r2 = x * x + y * y, r4 = r2 * r2, r6 = r4 * r2;
+  const double radial = (1 + k1 * r2 + k2 * r4 + k3 * r6) / (1 + k4 * r2 + k5 * r4 + k6 * r6);
+  return {x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+          y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y};
+}
+
+Eigen::Vector2d CameraIntrinsics::Undistort(const Eigen::Vector2d& d) const noexcept {
+  if (!HasDistortion()) return d;
+  Eigen::Vector2d n = d;
+  constexpr double kStep = 1e-7;
+  for (int it = 0; it < 50; ++it) {
+    const Eigen::Vector2d r = Distort(n) - d;
+    if (r.squaredNorm() < 1e-26) return n;
+    Eigen::Matrix2d j;
+    j.col(0) = (Distort(n + Eigen::Vector2d(kStep, 0)) - Distort(n - Eigen::Vector2d(kStep, 0))) /
+               (2 * kStep);
+    j.col(1) = (Distort(n + Eigen::Vector2d(0, kStep)) - Distort(n - Eigen::Vector2d(0, kStep))) /
+               (2 * kStep);
+    const double det = j.determinant();
+    if (!std::isfinite(det) || std::abs(det) < 1e-12) break;
+    n -= j.inverse() * r;
+  }
+  if ((Distort(n) - d).squaredNorm() < 1e-20) return n;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  return {nan, nan};
+}
+
+Eigen::Vector2d CameraIntrinsics::Project(const Eigen::Vector3d& p) const noexcept {
+  if (!(p.z() > 0)) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    return {nan, nan};
+  }
+  const Eigen::Vector2d d = Distort({p.x() / p.z(), p.y() / p.z()});
+  return {fx_px * d.x() + cx_px, fy_px * d.y() + cy_px};
+}
+
+Eigen::Vector3d CameraIntrinsics::Unproject(const Eigen::Vector2d& pixel) const noexcept {
+  const Eigen::Vector2d n = Undistort({(pixel.x() - cx_px) / fx_px, (pixel.y() - cy_px) / fy_px});
+  return Eigen::Vector3d(n.x(), n.y(), 1.0).normalized();
+}
+
+double CameraIntrinsics::HorizontalFovRad() const noexcept {
+  return AngleBetween(Unproject({-0.5, cy_px}), Unproject({width - 0.5, cy_px}));
+}
+
+double CameraIntrinsics::VerticalFovRad() const noexcept {
+  return AngleBetween(Unproject({cx_px, -0.5}), Unproject({cx_px, height - 0.5}));
+}
+
+RayTable MakeRayTable(const CameraIntrinsics& k) {
+  k.Validate();
+  RayTable t{Image<float>(k.width, k.height), Image<float>(k.width, k.height),
+             Image<float>(k.width, k.height)};
+  for (int r = 0; r < k.height; ++r) {
+    for (int c = 0; c < k.width; ++c) {
+      const Eigen::Vector3d ray = k.Unproject({static_cast<double>(c), static_cast<double>(r)});
+      t.x(r, c) = static_cast<float>(ray.x());
+      t.y(r, c) = static_cast<float>(ray.y());
+      t.z(r, c) = static_cast<float>(ray.z());
+    }
+  }
+  return t;
+}
+
+}  // namespace tofcam

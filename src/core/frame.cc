@@ -1,0 +1,27 @@
+#include "tofcam/core/frame.h"
+
+#include <cmath>
+
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+
+void ValidateFrame(const Frame& frame, const std::string& what) {
+  const int w = frame.distance.width();
+  const int h = frame.distance.height();
+  if (w <= 0 || h <= 0) throw Error(ErrorCode::kInvalidArgument, what + ": empty distance image");
+  if (!frame.amplitude.SameSize(w, h) || !frame.intensity.SameSize(w, h)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                what + ": distance, amplitude and intensity images differ in size");
+  }
+  if (frame.truth && (!frame.truth->radial_distance_m.SameSize(w, h) ||
+                      !frame.truth->causes.SameSize(w, h))) {
+    throw Error(ErrorCode::kInvalidArgument, what + ": ground truth differs in size from frame");
+  }
+  const double f = frame.info.modulation_frequency_hz;
+  if (!std::isfinite(f) || f <= 0.0) {
+    throw Error(ErrorCode::kInvalidArgument, what + ": modulation frequency must be > 0 Hz");
+  }
+}
+
+}  // namespace tofcam
