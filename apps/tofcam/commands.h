@@ -1,12 +1,26 @@
 #pragma once
-// Subcommand registration. Each subcommand lives in its own <name>_command.cc and exposes one
-// Setup function that adds itself to the app; main.cc calls them all. A callback reports
-// failures by throwing tofcam::Error; main turns that into a one-line message and exit status.
+// Subcommand registration. Each subcommand lives in its own <name>_command.cc and registers a
+// setup function with TOFCAM_REGISTER_COMMAND; main.cc adds them all in name order. A callback
+// reports failures by throwing tofcam::Error; main turns that into a one-line message and exit
+// status. Long-running commands print progress to stderr.
 
 #include <CLI/CLI.hpp>
+#include <functional>
+#include <map>
+#include <string>
 
 namespace tofcam::cli {
 
-void SetupInfoCommand(CLI::App& app);
+using CommandSetup = std::function<void(CLI::App& app)>;
+
+/// All registered commands by name.
+std::map<std::string, CommandSetup>& CommandRegistry();
+
+/// Registers a subcommand; returns true so it can initialise a namespace-scope constant.
+bool RegisterCommand(const std::string& name, CommandSetup setup);
 
 }  // namespace tofcam::cli
+
+#define TOFCAM_REGISTER_COMMAND(name, setup) \
+  [[maybe_unused]] static const bool tofcam_registered_command_ =  \
+      ::tofcam::cli::RegisterCommand(name, setup)

@@ -38,8 +38,6 @@ void RunInfo(const InfoOptions& o) {
   std::printf("integration time    register 1..255 x 255 us (0.255 .. 65.025 ms)\n");
 }
 
-}  // namespace
-
 void SetupInfoCommand(CLI::App& app) {
   auto opts = std::make_shared<InfoOptions>();
   CLI::App* sub = app.add_subcommand("info", "Print camera geometry and register conventions");
@@ -49,5 +47,9 @@ void SetupInfoCommand(CLI::App& app) {
       ->capture_default_str();
   sub->callback([opts] { RunInfo(*opts); });
 }
+
+TOFCAM_REGISTER_COMMAND("info", SetupInfoCommand);
+
+}  // namespace
 
 }  // namespace tofcam::cli

@@ -7,11 +7,25 @@
 #include "tofcam/core/error.h"
 #include "tofcam/version.h"
 
+namespace tofcam::cli {
+
+std::map<std::string, CommandSetup>& CommandRegistry() {
+  static std::map<std::string, CommandSetup> registry;
+  return registry;
+}
+
+bool RegisterCommand(const std::string& name, CommandSetup setup) {
+  CommandRegistry().emplace(name, std::move(setup));
+  return true;
+}
+
+}  // namespace tofcam::cli
+
 int main(int argc, char** argv) {
   CLI::App app{"tofcam: time-of-flight cameras for mobile robots"};
   app.set_version_flag("--version", tofcam::kVersionString);
   app.require_subcommand(1);
-  tofcam::cli::SetupInfoCommand(app);
+  for (auto& [name, setup] : tofcam::cli::CommandRegistry()) setup(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -59,6 +59,8 @@ struct MetricFrame {
   /// (then the accuracy model uses its amplitude-only form).
   Image<float> intensity;
   Image<PixelFlags> flags;         ///< Problems found so far; see Flag.
+  /// Predicted inaccuracy ΔL (m) per pixel (paper eq. 2); empty until the accuracy stage ran.
+  Image<float> delta_l_m;
   FrameInfo info;
   std::optional<GroundTruth> truth;
 

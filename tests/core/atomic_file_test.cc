@@ -1,0 +1,62 @@
+#include "tofcam/core/atomic_file.h"
+
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path TempDir() {
+  fs::path d = fs::temp_directory_path() / ("tofcam_atomic_" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  return d;
+}
+
+TEST(AtomicFileTest, WritesAndReadsBack) {
+  const fs::path p = TempDir() / "a.txt";
+  WriteFileAtomically(p, "hello");
+  EXPECT_EQ(ReadFile(p), "hello");
+  WriteFileAtomically(p, "replaced");
+  EXPECT_EQ(ReadFile(p), "replaced");
+}
+
+TEST(AtomicFileTest, UncommittedWriteLeavesOldFileAndNoTemporary) {
+  const fs::path dir = TempDir() / "uncommitted";
+  fs::create_directories(dir);
+  const fs::path p = dir / "b.txt";
+  WriteFileAtomically(p, "old");
+  {
+    AtomicFile f(p);
+    f.Write("half");
+    // Destroyed without Commit(), as when an exception unwinds.
+  }
+  EXPECT_EQ(ReadFile(p), "old");
+  int entries = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++entries;
+  EXPECT_EQ(entries, 1);
+}
+
+TEST(AtomicFileTest, ErrorsNameThePath) {
+  try {
+    (void)ReadFile("/nonexistent/tofcam/file.yaml");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kNotFound);
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/tofcam/file.yaml"), std::string::npos);
+  }
+  EXPECT_THROW(AtomicFile("/nonexistent/dir/x"), Error);
+  const fs::path big = TempDir() / "big.bin";
+  WriteFileAtomically(big, std::string(100, 'x'));
+  EXPECT_THROW((void)ReadFile(big, 10), Error);
+  EXPECT_THROW((void)ReadFile(TempDir()), Error);  // a directory
+}
+
+}  // namespace
+}  // namespace tofcam
