@@ -15,11 +15,11 @@ namespace tofcam::cli {
 
 /// Options every source may honour (a source ignores what does not apply to it).
 struct CameraSourceOptions {
-  std::uint64_t seed = 1;         ///< Simulator noise seed.
-  bool real_time = false;         ///< Throttle to the camera's frame rate (simulator, playback).
-  bool loop = false;              ///< Playback: start again at the end.
+  std::uint64_t seed = 1;  ///< Simulator noise seed.
+  bool real_time = false;  ///< Throttle to the camera's frame rate (simulator, playback).
+  bool loop = false;       ///< Playback: start again at the end.
   int integration_time_register = 0;  ///< 0 = the source's default.
-  std::string camera_model;       ///< Simulator: camera model name or YAML file; "" = SR-2.
+  std::string camera_model;           ///< Simulator: camera model name or YAML file; "" = SR-2.
 };
 
 using CameraFactory =
@@ -43,6 +43,6 @@ bool RegisterCameraSource(const std::string& kind, CameraSourceKind source);
 
 }  // namespace tofcam::cli
 
-#define TOFCAM_REGISTER_CAMERA_SOURCE(kind, help, factory)          \
-  [[maybe_unused]] static const bool tofcam_registered_source_ =     \
+#define TOFCAM_REGISTER_CAMERA_SOURCE(kind, help, factory)       \
+  [[maybe_unused]] static const bool tofcam_registered_source_ = \
       ::tofcam::cli::RegisterCameraSource(kind, {help, factory})

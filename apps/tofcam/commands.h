@@ -21,6 +21,6 @@ bool RegisterCommand(const std::string& name, CommandSetup setup);
 
 }  // namespace tofcam::cli
 
-#define TOFCAM_REGISTER_COMMAND(name, setup) \
-  [[maybe_unused]] static const bool tofcam_registered_command_ =  \
+#define TOFCAM_REGISTER_COMMAND(name, setup)                      \
+  [[maybe_unused]] static const bool tofcam_registered_command_ = \
       ::tofcam::cli::RegisterCommand(name, setup)

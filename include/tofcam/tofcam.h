@@ -2,8 +2,8 @@
 /// \file
 /// Umbrella header of the core library (tofcam::tofcam).
 
-#include "tofcam/core/camera.h"
 #include "tofcam/core/atomic_file.h"
+#include "tofcam/core/camera.h"
 #include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/frame.h"

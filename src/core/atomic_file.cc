@@ -52,7 +52,8 @@ void AtomicFile::Commit() {
   }
   std::error_code ec;
   std::filesystem::rename(temp_path_, path_, ec);
-  if (ec) throw Error(ErrorCode::kIo, path_.string() + ": cannot rename into place: " + ec.message());
+  if (ec)
+    throw Error(ErrorCode::kIo, path_.string() + ": cannot rename into place: " + ec.message());
   committed_ = true;
 }
 

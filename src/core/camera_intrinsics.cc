@@ -34,12 +34,23 @@ CameraIntrinsics CameraIntrinsics::SwissRangerSr2() {
 }
 
 void CameraIntrinsics::Validate() const {
-  if (width <= 0 || height <= 0 || static_cast<long long>(width) * height > Image<float>::kMaxPixels) {
-    throw Error(ErrorCode::kInvalidArgument, "intrinsics: width and height must be > 0 and the image at most 2^28 pixels");
+  if (width <= 0 || height <= 0 ||
+      static_cast<long long>(width) * height > Image<float>::kMaxPixels) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "intrinsics: width and height must be > 0 and the image at most 2^28 pixels");
   }
-  for (auto [v, n] : {std::pair{fx_px, "fx_px"}, {fy_px, "fy_px"}, {cx_px, "cx_px"},
-                      {cy_px, "cy_px"}, {k1, "k1"}, {k2, "k2"}, {k3, "k3"}, {k4, "k4"},
-                      {k5, "k5"}, {k6, "k6"}, {p1, "p1"}, {p2, "p2"}}) {
+  for (auto [v, n] : {std::pair{fx_px, "fx_px"},
+                      {fy_px, "fy_px"},
+                      {cx_px, "cx_px"},
+                      {cy_px, "cy_px"},
+                      {k1, "k1"},
+                      {k2, "k2"},
+                      {k3, "k3"},
+                      {k4, "k4"},
+                      {k5, "k5"},
+                      {k6, "k6"},
+                      {p1, "p1"},
+                      {p2, "p2"}}) {
     RequireFinite(v, n);
   }
   if (fx_px <= 0 || fy_px <= 0) {

@@ -24,6 +24,7 @@ std::string_view ErrorCodeName(ErrorCode code) noexcept {
 
 int ExitStatus(ErrorCode code) noexcept { return 2 + static_cast<int>(code); }
 
-Error::Error(ErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
+Error::Error(ErrorCode code, const std::string& message)
+    : std::runtime_error(message), code_(code) {}
 
 }  // namespace tofcam

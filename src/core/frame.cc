@@ -14,9 +14,12 @@ void ValidateFrame(const Frame& frame, const std::string& what) {
     throw Error(ErrorCode::kInvalidArgument,
                 what + ": distance, amplitude and intensity images differ in size");
   }
-  if (frame.truth && (!frame.truth->radial_distance_m.SameSize(w, h) ||
-                      !frame.truth->causes.SameSize(w, h))) {
+  if (frame.truth &&
+      (!frame.truth->radial_distance_m.SameSize(w, h) || !frame.truth->causes.SameSize(w, h))) {
     throw Error(ErrorCode::kInvalidArgument, what + ": ground truth differs in size from frame");
+  }
+  if (!frame.source_flags.empty() && !frame.source_flags.SameSize(w, h)) {
+    throw Error(ErrorCode::kInvalidArgument, what + ": source flags differ in size from frame");
   }
   const double f = frame.info.modulation_frequency_hz;
   if (!std::isfinite(f) || f <= 0.0) {

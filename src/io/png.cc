@@ -3,8 +3,8 @@
 #include <png.h>
 
 #include <csetjmp>
-#include <cstring>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <vector>
@@ -34,8 +34,8 @@ void WriteRows(const std::filesystem::path& path, int width, int height, int bit
   }
   AtomicFile out(path);
   std::string message;
-  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &message, OnPngError,
-                                            OnPngWarning);
+  png_structp png =
+      png_create_write_struct(PNG_LIBPNG_VER_STRING, &message, OnPngError, OnPngWarning);
   png_infop info = png ? png_create_info_struct(png) : nullptr;
   if (png == nullptr || info == nullptr) {
     png_destroy_write_struct(&png, nullptr);

@@ -1,7 +1,6 @@
 #include "tofcam/core/atomic_file.h"
 
 #include <gtest/gtest.h>
-
 #include <unistd.h>
 
 #include <filesystem>

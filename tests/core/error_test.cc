@@ -7,10 +7,9 @@
 namespace tofcam {
 namespace {
 
-constexpr ErrorCode kCodes[] = {ErrorCode::kInvalidArgument, ErrorCode::kNotFound,
-                                ErrorCode::kIo,          ErrorCode::kFormat,
-                                ErrorCode::kMismatch,    ErrorCode::kUnsupported,
-                                ErrorCode::kInternal};
+constexpr ErrorCode kCodes[] = {
+    ErrorCode::kInvalidArgument, ErrorCode::kNotFound,    ErrorCode::kIo,      ErrorCode::kFormat,
+    ErrorCode::kMismatch,        ErrorCode::kUnsupported, ErrorCode::kInternal};
 
 TEST(ErrorTest, CarriesCodeAndMessage) {
   const Error e(ErrorCode::kFormat, "calib.yaml: line 3: bad matrix");

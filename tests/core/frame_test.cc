@@ -40,6 +40,11 @@ TEST(FrameTest, ValidateRejectsMismatchedChannels) {
   f.info.modulation_frequency_hz = 0;
   EXPECT_THROW(ValidateFrame(f, "test frame"), Error);
   EXPECT_THROW(ValidateFrame(Frame{}), Error);
+  f = MakeFrame(4, 4);
+  f.source_flags = Image<PixelFlags>(3, 4);
+  EXPECT_THROW(ValidateFrame(f), Error);
+  f.source_flags = Image<PixelFlags>(4, 4);
+  EXPECT_NO_THROW(ValidateFrame(f));
 }
 
 }  // namespace

@@ -16,16 +16,16 @@ namespace tofcam {
 
 /// Static description of a camera.
 struct CameraInfo {
-  std::string model = "SR-2";           ///< Model name.
+  std::string model = "SR-2";  ///< Model name.
   CameraIntrinsics intrinsics = CameraIntrinsics::SwissRangerSr2();
-  double modulation_frequency_hz = 20e6;  ///< Current modulation frequency, Hz.
+  double modulation_frequency_hz = 20e6;    ///< Current modulation frequency, Hz.
   double integration_time_step_us = 255.0;  ///< µs per integration-time register step.
   double integration_time_base_us = 0.0;    ///< µs at register 0: time = base + register * step.
   int min_integration_register = 1;
   int max_integration_register = 255;
-  double max_frame_rate_hz = 30.0;      ///< Upper bound of the frame rate.
-  bool has_intensity = true;            ///< False for sources without an offset channel.
-  bool has_ground_truth = false;        ///< True for simulators.
+  double max_frame_rate_hz = 30.0;  ///< Upper bound of the frame rate.
+  bool has_intensity = true;        ///< False for sources without an offset channel.
+  bool has_ground_truth = false;    ///< True for simulators.
 
   [[nodiscard]] int width() const noexcept { return intrinsics.width; }
   [[nodiscard]] int height() const noexcept { return intrinsics.height; }

@@ -14,12 +14,12 @@
 namespace tofcam {
 
 struct CameraIntrinsics {
-  int width = 160;         ///< Pixels per row (> 0).
-  int height = 124;        ///< Rows (> 0).
-  double fx_px = 204.0816; ///< Focal length / horizontal pixel pitch, px (> 0).
-  double fy_px = 145.9854; ///< Focal length / vertical pixel pitch, px (> 0).
-  double cx_px = 79.5;     ///< Principal point column, px.
-  double cy_px = 61.5;     ///< Principal point row, px.
+  int width = 160;                ///< Pixels per row (> 0).
+  int height = 124;               ///< Rows (> 0).
+  double fx_px = 204.0816;        ///< Focal length / horizontal pixel pitch, px (> 0).
+  double fy_px = 145.9854;        ///< Focal length / vertical pixel pitch, px (> 0).
+  double cx_px = 79.5;            ///< Principal point column, px.
+  double cy_px = 61.5;            ///< Principal point row, px.
   double k1 = 0, k2 = 0, k3 = 0;  ///< Radial numerator coefficients.
   double k4 = 0, k5 = 0, k6 = 0;  ///< Radial denominator coefficients (rational model).
   double p1 = 0, p2 = 0;          ///< Tangential coefficients.

@@ -14,14 +14,17 @@ namespace tofcam {
 
 /// Acquisition metadata of one frame.
 struct FrameInfo {
-  std::uint64_t sequence = 0;          ///< Frame counter since the camera was opened, from 0.
-  std::int64_t timestamp_ns = 0;       ///< Mid-exposure time in ns since the camera was opened.
-  int integration_time_register = 0;   ///< Raw register (SR-2: 1..255); 0 when unknown.
-  double integration_time_us = 0.0;    ///< Integration time in µs (SR-2: register x 255 µs).
+  std::uint64_t sequence = 0;             ///< Frame counter since the camera was opened, from 0.
+  std::int64_t timestamp_ns = 0;          ///< Mid-exposure time in ns since the camera was opened.
+  int integration_time_register = 0;      ///< Raw register (SR-2: 1..255); 0 when unknown.
+  double integration_time_us = 0.0;       ///< Integration time in µs (SR-2: register x 255 µs).
   double modulation_frequency_hz = 20e6;  ///< Modulation frequency, Hz (> 0).
-  double pan_angle_rad = 0.0;          ///< Pan-unit angle, rad, positive = counter-clockwise.
-  int distance_offset_register = 0;    ///< Camera distance-offset register (0 during calibration).
-  std::string camera_model;            ///< Model name, e.g. "SR-2".
+  double pan_angle_rad = 0.0;             ///< Pan-unit angle, rad, positive = counter-clockwise.
+  int distance_offset_register = 0;  ///< Camera distance-offset register (0 during calibration).
+  std::string camera_model;          ///< Model name, e.g. "SR-2".
+  /// False when the source has no intensity (offset) channel; `Frame::intensity` then holds
+  /// zeros and the accuracy model uses its amplitude-only form.
+  bool has_intensity = true;
 };
 
 /// Ground truth a simulator attaches to each frame.
@@ -44,6 +47,9 @@ struct Frame {
   Image<std::uint16_t> distance;
   Image<std::uint16_t> amplitude;
   Image<std::uint16_t> intensity;
+  /// Per-pixel problems the camera itself reports (e.g. a real camera's confidence bits mapped to
+  /// kInvalid / kSaturated); empty when the source reports none.
+  Image<PixelFlags> source_flags;
   FrameInfo info;
   std::optional<GroundTruth> truth;  ///< Present only when the source is a simulator.
 
@@ -58,7 +64,7 @@ struct MetricFrame {
   /// Intensity (offset) in register units; empty when the source has no intensity channel
   /// (then the accuracy model uses its amplitude-only form).
   Image<float> intensity;
-  Image<PixelFlags> flags;         ///< Problems found so far; see Flag.
+  Image<PixelFlags> flags;  ///< Problems found so far; see Flag.
   /// Predicted inaccuracy ΔL (m) per pixel (paper eq. 2); empty until the accuracy stage ran.
   Image<float> delta_l_m;
   FrameInfo info;

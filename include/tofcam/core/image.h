@@ -25,8 +25,8 @@ class ImageView {
   ImageView(T* data, int width, int height) : ImageView(data, width, height, width) {}
 
   /// Implicit conversion from a mutable view to a const view.
-  template <typename U, typename = std::enable_if_t<std::is_same_v<const U, T> &&
-                                                    !std::is_same_v<U, T>>>
+  template <typename U,
+            typename = std::enable_if_t<std::is_same_v<const U, T> && !std::is_same_v<U, T>>>
   ImageView(const ImageView<U>& other)  // NOLINT(google-explicit-constructor)
       : ImageView(other.data(), other.width(), other.height(), other.stride()) {}
 

@@ -15,7 +15,7 @@
 namespace tofcam {
 
 struct PanUnit {
-  Eigen::Vector3d axis = {0.0, -1.0, 0.0};            ///< Rotation axis in the base frame (unit).
+  Eigen::Vector3d axis = {0.0, -1.0, 0.0};             ///< Rotation axis in the base frame (unit).
   Eigen::Vector3d camera_offset_m = {0.0, 0.0, 0.05};  ///< Optical centre from rotation centre, m.
 
   /// Transform taking camera-frame points at pan angle `angle_rad` into the base frame.

@@ -12,20 +12,20 @@ namespace tofcam {
 /// One problem a pixel can have. The same bits serve the pipeline (what a filter decided) and
 /// the simulator's ground truth (what physically happened to the pixel).
 enum class Flag : std::uint16_t {
-  kInvalid = 1u << 0,          ///< No usable measurement at all (e.g. zero amplitude, import gap).
-  kSaturated = 1u << 1,        ///< At least one tap clipped at full well.
-  kLowAmplitude = 1u << 2,     ///< Amplitude below the amplitude threshold.
-  kHighDeltaL = 1u << 3,       ///< Predicted inaccuracy ΔL (eq. 2) above the threshold.
-  kJumpEdge = 1u << 4,         ///< Removed by the jump-edge filter (May et al.).
-  kFlyingPixel = 1u << 5,      ///< Removed by the edge-aware flying-pixel filter.
-  kOutOfRange = 1u << 6,       ///< Distance outside the configured range limits.
-  kBeyondUnambiguous = 1u << 7,///< Truth: the surface lies beyond the unambiguous range L.
-  kSparseCell = 1u << 8,       ///< Removed by the Weingarten cell filter.
-  kMixed = 1u << 9,            ///< Truth: the pixel footprint straddles a depth edge.
-  kMultipath = 1u << 10,       ///< Truth: a secondary (mirror / inter-reflection) path contributes.
-  kScattering = 1u << 11,      ///< Truth: in-camera scattering dominates the pixel's error.
-  kNoReturn = 1u << 12,        ///< Truth: the ray hits nothing (open sky / beyond the scene).
-  kMotion = 1u << 13,          ///< Truth: taps disagree because the scene moved during exposure.
+  kInvalid = 1u << 0,       ///< No usable measurement at all (e.g. zero amplitude, import gap).
+  kSaturated = 1u << 1,     ///< At least one tap clipped at full well.
+  kLowAmplitude = 1u << 2,  ///< Amplitude below the amplitude threshold.
+  kHighDeltaL = 1u << 3,    ///< Predicted inaccuracy ΔL (eq. 2) above the threshold.
+  kJumpEdge = 1u << 4,      ///< Removed by the jump-edge filter (May et al.).
+  kFlyingPixel = 1u << 5,   ///< Removed by the edge-aware flying-pixel filter.
+  kOutOfRange = 1u << 6,    ///< Distance outside the configured range limits.
+  kBeyondUnambiguous = 1u << 7,  ///< Truth: the surface lies beyond the unambiguous range L.
+  kSparseCell = 1u << 8,         ///< Removed by the Weingarten cell filter.
+  kMixed = 1u << 9,              ///< Truth: the pixel footprint straddles a depth edge.
+  kMultipath = 1u << 10,   ///< Truth: a secondary (mirror / inter-reflection) path contributes.
+  kScattering = 1u << 11,  ///< Truth: in-camera scattering dominates the pixel's error.
+  kNoReturn = 1u << 12,    ///< Truth: the ray hits nothing (open sky / beyond the scene).
+  kMotion = 1u << 13,      ///< Truth: taps disagree because the scene moved during exposure.
 };
 
 /// All flags set by pipeline filters: a pixel with any of these is rejected.
@@ -47,7 +47,9 @@ class PixelFlags {
     return (bits_ & static_cast<std::uint16_t>(flag)) != 0;
   }
   /// True when any bit of `mask` is set.
-  [[nodiscard]] constexpr bool Any(std::uint16_t mask) const noexcept { return (bits_ & mask) != 0; }
+  [[nodiscard]] constexpr bool Any(std::uint16_t mask) const noexcept {
+    return (bits_ & mask) != 0;
+  }
   [[nodiscard]] constexpr bool None() const noexcept { return bits_ == 0; }
   /// True when no reject bit (kRejectMask) is set: the pixel may be used.
   [[nodiscard]] constexpr bool Valid() const noexcept { return (bits_ & kRejectMask) == 0; }
@@ -68,7 +70,9 @@ class PixelFlags {
   friend constexpr PixelFlags operator&(PixelFlags a, PixelFlags b) noexcept {
     return PixelFlags(static_cast<std::uint16_t>(a.bits_ & b.bits_));
   }
-  friend constexpr bool operator==(PixelFlags a, PixelFlags b) noexcept { return a.bits_ == b.bits_; }
+  friend constexpr bool operator==(PixelFlags a, PixelFlags b) noexcept {
+    return a.bits_ == b.bits_;
+  }
 
  private:
   std::uint16_t bits_ = 0;
@@ -85,9 +89,9 @@ static_assert(sizeof(PixelFlags) == 2);
 
 /// Every Flag value in bit order, for iteration.
 inline constexpr Flag kAllFlags[] = {
-    Flag::kInvalid,     Flag::kSaturated,  Flag::kLowAmplitude, Flag::kHighDeltaL,
-    Flag::kJumpEdge,    Flag::kFlyingPixel, Flag::kOutOfRange,  Flag::kBeyondUnambiguous,
-    Flag::kSparseCell,  Flag::kMixed,      Flag::kMultipath,    Flag::kScattering,
-    Flag::kNoReturn,    Flag::kMotion};
+    Flag::kInvalid,    Flag::kSaturated,   Flag::kLowAmplitude, Flag::kHighDeltaL,
+    Flag::kJumpEdge,   Flag::kFlyingPixel, Flag::kOutOfRange,   Flag::kBeyondUnambiguous,
+    Flag::kSparseCell, Flag::kMixed,       Flag::kMultipath,    Flag::kScattering,
+    Flag::kNoReturn,   Flag::kMotion};
 
 }  // namespace tofcam
