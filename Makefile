@@ -45,7 +45,7 @@ format-check:
 	@clang-format --dry-run --Werror $(FORMAT_FILES) && echo "format-check: clean"
 
 tidy: configure
-	@clang-tidy -p $(BUILD) --quiet $(filter %.cc,$(FORMAT_FILES))
+	@clang-tidy -p $(BUILD) --quiet --extra-arg=-Wno-unknown-warning-option $(filter %.cc,$(FORMAT_FILES))
 
 clean:
 	rm -rf $(BUILD) $(ASAN_BUILD)

@@ -23,10 +23,10 @@ bool RegisterCommand(const std::string& name, CommandSetup setup) {
 
 int main(int argc, char** argv) {
   CLI::App app{"tofcam: time-of-flight cameras for mobile robots"};
-  app.set_version_flag("--version", tofcam::kVersionString);
-  app.require_subcommand(1);
-  for (auto& [name, setup] : tofcam::cli::CommandRegistry()) setup(app);
   try {
+    app.set_version_flag("--version", tofcam::kVersionString);
+    app.require_subcommand(1);
+    for (auto& [name, setup] : tofcam::cli::CommandRegistry()) setup(app);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
