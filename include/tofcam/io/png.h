@@ -7,14 +7,9 @@
 #include <filesystem>
 
 #include "tofcam/core/image.h"
+#include "tofcam/core/rgb.h"
 
 namespace tofcam {
-
-/// One 8-bit RGB pixel.
-struct Rgb8 {
-  std::uint8_t r = 0, g = 0, b = 0;
-  friend bool operator==(const Rgb8&, const Rgb8&) = default;
-};
 
 /// Writes an 8-bit RGB PNG. Throws Error(kIo) naming the path on failure,
 /// Error(kInvalidArgument) for an empty image.

@@ -1,0 +1,722 @@
+// `tofcam bench`: per-stage and whole-pipeline speed on simulated frames at 160x124, 640x480 and
+// 1024x1024, single- and two-threaded, each beside a memcpy moving the same number of bytes (the
+// memory-bandwidth floor), plus simulator frames/s and the memory bandwidth. See
+// docs/benchmarks.md.
+//
+// No stage has a threaded path of its own, so the 2-thread figure is two frames processed
+// concurrently (each thread owns its inputs and outputs); it is reported as wall time per frame.
+// Each figure is the median of 5 batches (robust against other processes on a shared machine).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "commands.h"
+#include "tofcam/accuracy/delta_l.h"
+#include "tofcam/calibration/offset_calibration.h"
+#include "tofcam/cloud/point_cloud.h"
+#include "tofcam/color/false_color.h"
+#include "tofcam/control/integration_time_controller.h"
+#include "tofcam/core/atomic_file.h"
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+#include "tofcam/filters/filter_set.h"
+#include "tofcam/io/recording.h"
+#include "tofcam/pan/pan_view.h"
+#include "tofcam/pipeline/metric_conversion.h"
+#include "tofcam/pipeline/pipeline.h"
+#include "tofcam/sim/simulated_camera.h"
+
+namespace tofcam::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using nlohmann::json;
+
+struct BenchOptions {
+  bool json_output = false;
+  int frames = 8;            // simulated frames per resolution, cycled through by every stage
+  int threads = 0;           // 0 = both 1 and 2
+  double min_time_s = 0.25;  // per figure (5 batches)
+  std::string export_peers_dir;  // write clouds + tofcam filter results for bench/peers
+  bool skip_simulator = false;
+  bool skip_recording = false;
+};
+
+// The pavilion with the camera driving back and forth at 0.5 m/s while turning (as sim_bench):
+// every frame sees a new pose, so nothing can be cached.
+sim::Scene MovingPavilion() {
+  sim::Scene s = sim::LoadBuiltinScene("pavilion");
+  s.camera.keys.clear();
+  for (int i = 0; i <= 250; ++i) {
+    sim::Keyframe k;
+    k.time_s = 4.0 * i;
+    k.position_m = {0, 0, i % 2 == 0 ? 0.0 : 2.0};
+    k.rotation_deg = {0, i % 2 == 0 ? -6.0 : 6.0, 0};
+    s.camera.keys.push_back(k);
+  }
+  return s;
+}
+
+// The SR-2 model with its field of view kept and the pixel count changed. The pixel pitch stays,
+// so with the same f-number each pixel collects the same signal as an SR-2 pixel.
+sim::CameraModel ScaledSr2(int width, int height) {
+  sim::CameraModel m = sim::ResolveCameraModel("sr2");
+  CameraIntrinsics& k = m.intrinsics;
+  k.fx_px *= width / static_cast<double>(k.width);
+  k.fy_px *= height / static_cast<double>(k.height);
+  k.width = width;
+  k.height = height;
+  k.cx_px = (width - 1) / 2.0;
+  k.cy_px = (height - 1) / 2.0;
+  return m;
+}
+
+// The simulated frames of one resolution and everything the stages need besides.
+struct Input {
+  std::string name;
+  int width = 0;
+  int height = 0;
+  CameraInfo info;
+  RayTable rays;
+  OffsetCalibration calibration;
+  std::vector<Frame> frames;
+  std::vector<MetricFrame> ready;  // converted, calibrated, ΔL filled: input of later stages
+  [[nodiscard]] std::int64_t pixels() const { return std::int64_t{width} * height; }
+};
+
+Input MakeInput(int width, int height, int frames) {
+  Input in;
+  in.width = width;
+  in.height = height;
+  in.name = std::to_string(width) + "x" + std::to_string(height);
+  sim::SimulatorOptions so;
+  so.seed = 7;
+  so.threads = 2;  // generating the inputs is not what is measured
+  so.integration_time_register = 40;
+  sim::SimulatedCamera cam(MovingPavilion(), ScaledSr2(width, height), so);
+  in.info = cam.Info();
+  in.rays = MakeRayTable(in.info.intrinsics);
+  // The calibration a wall measurement would give: the simulator's own fixed-pattern offsets,
+  // plus a distance-dependent table so the costlier form of eq. 1 is the one timed.
+  OffsetCalibration& c = in.calibration;
+  c.camera_model = in.info.model;
+  c.width = width;
+  c.height = height;
+  c.modulation_frequency_hz = in.info.modulation_frequency_hz;
+  c.offset_m = cam.FixedPatternOffsetM();
+  c.pixel_flags = Image<PixelFlags>(width, height);
+  DistanceCorrection g;
+  g.start_m = 0.3;
+  g.step_m = 0.05;
+  for (int k = 0; k < 150; ++k) {
+    g.correction_m.push_back(static_cast<float>(0.03 * std::sin(k * 0.05 * 4 * kPi / 7.5)));
+  }
+  c.distance_correction = g;
+  c.Validate();
+  for (int i = 0; i < frames; ++i) {
+    std::optional<Frame> f = cam.Grab();
+    if (!f) throw Error(ErrorCode::kInternal, "simulator returned no frame");
+    MetricFrame m = ConvertToMetric(*f);
+    ApplyCalibrationInPlace(m, c);
+    ComputeDeltaLInto(m, {}, m.delta_l_m);
+    in.frames.push_back(std::move(*f));
+    in.ready.push_back(std::move(m));
+  }
+  return in;
+}
+
+// Per-thread state: own copies of the inputs and own output buffers.
+struct Workspace {
+  const Input* input = nullptr;
+  std::vector<Frame> frames;
+  std::vector<MetricFrame> ready;
+  std::vector<MetricFrame> calibrate;  // calibrated in place, over and over
+  std::vector<MetricFrame> pan_frames;
+  MetricFrame metric;
+  Image<float> delta_l;
+  PointCloud cloud;
+  std::unique_ptr<IntegrationTimeController> controller;
+  std::optional<Pipeline> pipeline_default;
+  std::optional<Pipeline> pipeline_all_filters;
+  PipelineResult result;
+  std::vector<char> copy_src;
+  std::vector<char> copy_dst;
+  std::size_t copy_bytes = 0;
+  std::uint64_t sink = 0;
+};
+
+FilterSetOptions AllFilters() {
+  FilterSetOptions o;
+  o.range_enabled = o.amplitude_enabled = o.saturation_enabled = o.accuracy_enabled = true;
+  o.flying_pixel_enabled = o.jump_edge_enabled = o.weingarten_enabled = true;
+  return o;
+}
+
+FilterSetOptions OnlyFilter(const std::string& name) {
+  FilterSetOptions o;
+  o.saturation_enabled = o.accuracy_enabled = false;
+  if (name == "accuracy") o.accuracy_enabled = true;
+  if (name == "amplitude") o.amplitude_enabled = true;
+  if (name == "saturation") o.saturation_enabled = true;
+  if (name == "range") o.range_enabled = true;
+  if (name == "flying_pixel") o.flying_pixel_enabled = true;
+  if (name == "jump_edge") o.jump_edge_enabled = true;
+  if (name == "weingarten") o.weingarten_enabled = true;
+  return o;
+}
+
+void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
+  ws.input = &in;
+  ws.frames = in.frames;
+  ws.ready = in.ready;
+  ws.calibrate = in.ready;
+  for (int k = 0; k < 5; ++k) {
+    MetricFrame f = in.ready[static_cast<std::size_t>(k) % in.ready.size()];
+    f.info.pan_angle_rad = (-60.0 + 30.0 * k) * kPi / 180.0;
+    ws.pan_frames.push_back(std::move(f));
+  }
+  ws.controller = MakeController({});
+  PipelineOptions po;
+  po.calibration = in.calibration;
+  ws.pipeline_default.emplace(po, in.info);
+  po.filters = AllFilters();
+  ws.pipeline_all_filters.emplace(po, in.info);
+  // Touch the copy buffers now so page faults are not part of the floor.
+  ws.copy_src.assign(max_copy_bytes, 1);
+  ws.copy_dst.assign(max_copy_bytes, 0);
+}
+
+// One stage: `run(ws, i)` processes frame i (mod the frame count) of the workspace.
+struct Stage {
+  std::string name;
+  double bytes_per_pixel = 0;  // minimal memory traffic (read + write) of the stage
+  int frames_per_call = 1;
+  bool threadable = true;
+  std::function<void(Workspace&, std::size_t)> run;
+};
+
+void Sink(Workspace& ws, const void* p) {
+  ws.sink += reinterpret_cast<std::uintptr_t>(p) & 1u;
+}
+
+std::vector<Stage> MakeStages() {
+  std::vector<Stage> s;
+  // Bytes per pixel: read + write of the data the stage must touch at least.
+  s.push_back({"metric conversion", 6 + 14, 1, true, [](Workspace& ws, std::size_t i) {
+                 ConvertToMetricInto(ws.frames[i % ws.frames.size()], {}, ws.metric);
+                 Sink(ws, ws.metric.radial_distance_m.data());
+               }});
+  s.push_back({"calibration (eq. 1 + table)", 4 + 4 + 2 + 2 + 4 + 2, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 MetricFrame& m = ws.calibrate[i % ws.calibrate.size()];
+                 ApplyCalibrationInPlace(m, ws.input->calibration);
+                 Sink(ws, m.radial_distance_m.data());
+               }});
+  s.push_back({"delta L (eq. 2)", 4 + 4 + 4, 1, true, [](Workspace& ws, std::size_t i) {
+                 ComputeDeltaLInto(ws.ready[i % ws.ready.size()], {}, ws.delta_l);
+                 Sink(ws, ws.delta_l.data());
+               }});
+  const std::pair<const char*, const char*> filters[] = {
+      {"filter: accuracy threshold", "accuracy"}, {"filter: amplitude", "amplitude"},
+      {"filter: saturation", "saturation"},       {"filter: range", "range"},
+      {"filter: flying pixel", "flying_pixel"},   {"filter: jump edge", "jump_edge"},
+      {"filter: Weingarten cells", "weingarten"}};
+  const std::map<std::string, double> filter_bytes = {
+      {"accuracy", 4 + 2 + 2},   {"amplitude", 4 + 2 + 2},    {"saturation", 4 + 4 + 2 + 2},
+      {"range", 4 + 2 + 2},      {"flying_pixel", 4 + 2 + 2}, {"jump_edge", 4 + 12 + 2 + 2},
+      {"weingarten", 4 + 12 + 2 + 2}};
+  for (const auto& [label, key] : filters) {
+    const FilterSetOptions o = OnlyFilter(key);
+    s.push_back({label, filter_bytes.at(key), 1, true, [o](Workspace& ws, std::size_t i) {
+                   const Image<PixelFlags> f =
+                       ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, o);
+                   Sink(ws, f.data());
+                 }});
+  }
+  s.push_back({"filters: paper default set", 4 + 4 + 4 + 2 + 2, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 const Image<PixelFlags> f =
+                     ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, {});
+                 Sink(ws, f.data());
+               }});
+  const FilterSetOptions all = AllFilters();
+  s.push_back({"filters: full set (all 7)", 4 + 4 + 4 + 4 + 12 + 2 + 2, 1, true,
+               [all](Workspace& ws, std::size_t i) {
+                 const Image<PixelFlags> f =
+                     ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, all);
+                 Sink(ws, f.data());
+               }});
+  s.push_back({"point cloud", 4 + 4 + 4 + 4 + 2 + 12 + 24 + 2, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 MakePointCloudInto(ws.ready[i % ws.ready.size()], ws.input->rays, ws.cloud);
+                 Sink(ws, ws.cloud.x.data());
+               }});
+  s.push_back({"false colour", 4 + 2 + 3, 1, true, [](Workspace& ws, std::size_t i) {
+                 const Image<Rgb8> img = FalseColor(ws.ready[i % ws.ready.size()], {});
+                 Sink(ws, img.data());
+               }});
+  s.push_back({"controller (May P)", 4 + 2, 1, true, [](Workspace& ws, std::size_t i) {
+                 ws.sink += static_cast<std::uint64_t>(
+                     ws.controller->Update(ws.ready[i % ws.ready.size()]));
+               }});
+  // Five frames at -60..60 degrees into the 180-degree cloud and panorama; per input frame.
+  s.push_back({"pan assembly (5 frames)", 4 + 4 + 2 + 12 + 16, 5, true,
+               [](Workspace& ws, std::size_t) {
+                 const PanView v = MakePanView(ws.pan_frames, ws.input->rays, {});
+                 Sink(ws, v.panorama.data());
+               }});
+  // The issue-4 target: metric + calibration + ΔL + threshold + point cloud, back to back into
+  // reused buffers. Floor: registers, offsets and rays in; metric frame, ΔL and cloud out.
+  s.push_back({"PAPER CHAIN (target)", 6 + 4 + 12 + 14 + 4 + 26, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 MetricFrame& m = ws.metric;
+                 ConvertToMetricInto(ws.frames[i % ws.frames.size()], {}, m);
+                 ApplyCalibrationInPlace(m, ws.input->calibration);
+                 ComputeDeltaLInto(m, {}, m.delta_l_m);
+                 MergeFlags(m, AccuracyThresholdFilter(m, {}));
+                 MakePointCloudInto(m, ws.input->rays, ws.cloud);
+                 Sink(ws, ws.cloud.x.data());
+               }});
+  s.push_back({"PIPELINE (Pipeline::Process, defaults)", 6 + 4 + 12 + 14 + 4 + 26, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 ws.pipeline_default->Process(ws.frames[i % ws.frames.size()], ws.result);
+                 Sink(ws, ws.result.cloud.x.data());
+               }});
+  s.push_back({"PIPELINE + all filters", 6 + 4 + 12 + 14 + 4 + 26, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 ws.pipeline_all_filters->Process(ws.frames[i % ws.frames.size()], ws.result);
+                 Sink(ws, ws.result.cloud.x.data());
+               }});
+  return s;
+}
+
+// Wall time (ns) of `threads` threads each calling fn `reps` times on its own workspace.
+double RunBatch(std::vector<Workspace>& ws, int threads,
+                const std::function<void(Workspace&, std::size_t)>& fn, std::size_t reps) {
+  const auto start = Clock::now();
+  if (threads == 1) {
+    for (std::size_t r = 0; r < reps; ++r) fn(ws[0], r);
+  } else {
+    std::vector<std::thread> pool;
+    for (int t = 1; t < threads; ++t) {
+      pool.emplace_back([&, t] {
+        for (std::size_t r = 0; r < reps; ++r) fn(ws[static_cast<std::size_t>(t)], r);
+      });
+    }
+    for (std::size_t r = 0; r < reps; ++r) fn(ws[0], r);
+    for (auto& th : pool) th.join();
+  }
+  return std::chrono::duration<double, std::nano>(Clock::now() - start).count();
+}
+
+// Wall ns per call (per thread: a call on each thread counts as `threads` calls), median of 5.
+double TimePerCall(std::vector<Workspace>& ws, int threads,
+                   const std::function<void(Workspace&, std::size_t)>& fn, double min_time_s) {
+  const double batch_ns = min_time_s * 1e9 / 5;
+  std::size_t reps = 1;
+  RunBatch(ws, threads, fn, 2);  // warm-up: buffers sized, caches and branch predictors primed
+  for (;;) {
+    const double t = RunBatch(ws, threads, fn, reps);
+    if (t >= batch_ns || reps >= (std::size_t{1} << 30)) break;
+    reps = std::max(reps * 2, static_cast<std::size_t>(reps * batch_ns / std::max(t, 1.0)));
+  }
+  std::vector<double> times;
+  for (int b = 0; b < 5; ++b) times.push_back(RunBatch(ws, threads, fn, reps));
+  std::sort(times.begin(), times.end());
+  return times[2] / static_cast<double>(reps * static_cast<std::size_t>(threads));
+}
+
+struct Row {
+  std::string stage;
+  std::string resolution;
+  std::int64_t pixels = 0;
+  int threads = 1;
+  double ns_per_frame = 0;
+  double bytes_per_pixel = 0;
+  double memcpy_ns = 0;
+  std::string note;
+};
+
+double MemcpyNs(std::vector<Workspace>& ws, int threads, std::size_t bytes, double min_time_s) {
+  for (auto& w : ws) w.copy_bytes = bytes;
+  return TimePerCall(
+      ws, threads,
+      [](Workspace& w, std::size_t) {
+        std::memcpy(w.copy_dst.data(), w.copy_src.data(), w.copy_bytes);
+        Sink(w, w.copy_dst.data());
+      },
+      min_time_s);
+}
+
+// Appends `frames` to a fresh recording / reads them back; ns per frame, median of 3 runs.
+std::pair<double, double> TimeRecording(const Input& in, const std::filesystem::path& dir,
+                                        const RecordingOptions& options) {
+  const std::filesystem::path path = dir / ("bench_" + in.name + ".h5");
+  std::vector<double> write_ns, read_ns;
+  for (int run = 0; run < 3; ++run) {
+    std::filesystem::remove(path);
+    {
+      RecordingWriter w(path, in.info, options);
+      const auto t0 = Clock::now();
+      for (const Frame& f : in.frames) w.Append(f);
+      w.Close();
+      write_ns.push_back(std::chrono::duration<double, std::nano>(Clock::now() - t0).count());
+    }
+    RecordingReader r(path);
+    const auto t0 = Clock::now();
+    std::uint64_t sink = 0;
+    for (std::size_t i = 0; i < r.frame_count(); ++i) sink += r.Read(i).distance[0];
+    read_ns.push_back(std::chrono::duration<double, std::nano>(Clock::now() - t0).count() +
+                      static_cast<double>(sink & 0));
+  }
+  std::filesystem::remove(path);
+  std::sort(write_ns.begin(), write_ns.end());
+  std::sort(read_ns.begin(), read_ns.end());
+  const double n = static_cast<double>(in.frames.size());
+  return {write_ns[1] / n, read_ns[1] / n};
+}
+
+struct SimRow {
+  std::string name;
+  int threads = 1;
+  double frames_per_s = 0;
+};
+
+double SimulatorFps(sim::Scene scene, const sim::CameraModel& model, int threads,
+                    double min_time_s) {
+  sim::SimulatorOptions so;
+  so.seed = 7;
+  so.threads = threads;
+  so.integration_time_register = 40;
+  sim::SimulatedCamera cam(std::move(scene), model, so);
+  for (int i = 0; i < 2; ++i) (void)cam.Grab();
+  const auto t0 = Clock::now();
+  int n = 0;
+  double elapsed = 0;
+  do {
+    (void)cam.Grab();
+    ++n;
+    elapsed = std::chrono::duration<double>(Clock::now() - t0).count();
+  } while (elapsed < min_time_s || n < 5);
+  return n / elapsed;
+}
+
+// Bad = |measured - true| > 5 cm or no true surface (the frame_stats definition).
+bool IsBad(const MetricFrame& m, std::size_t i) {
+  const float truth = m.truth->radial_distance_m[i];
+  const float d = m.radial_distance_m[i];
+  return !std::isfinite(truth) || !std::isfinite(d) || std::fabs(d - truth) > 0.05f;
+}
+
+// Writes, for bench/peers/peer_outlier_removal.py, each frame's cloud (every pixel with a
+// distance: float32 x, y, z, bad) and tofcam's filter results on the same points.
+void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& dir,
+                 double min_time_s, json& out) {
+  std::filesystem::create_directories(dir);
+  json res = json::array();
+  const std::pair<const char*, FilterSetOptions> configs[] = {
+      {"tofcam accuracy threshold", OnlyFilter("accuracy")},
+      {"tofcam jump edge", OnlyFilter("jump_edge")},
+      {"tofcam flying pixel", OnlyFilter("flying_pixel")},
+      {"tofcam Weingarten cells", OnlyFilter("weingarten")},
+      {"tofcam accuracy + jump edge + flying pixel",
+       [] {
+         FilterSetOptions o = OnlyFilter("accuracy");
+         o.jump_edge_enabled = o.flying_pixel_enabled = true;
+         return o;
+       }()},
+      {"tofcam full set (all 7)", AllFilters()}};
+  for (const Input& in : inputs) {
+    if (in.pixels() > 640 * 480) continue;  // peers take seconds per megapixel frame
+    json files = json::array();
+    for (std::size_t f = 0; f < in.ready.size(); ++f) {
+      const MetricFrame& m = in.ready[f];
+      PointCloudOptions co;
+      co.nan_mask = kRejectMask;
+      const PointCloud cloud = MakePointCloud(m, in.rays, co);
+      std::vector<float> rows;
+      for (std::size_t i = 0; i < cloud.size(); ++i) {
+        if (!cloud.IsValid(i)) continue;
+        rows.insert(rows.end(), {cloud.x[i], cloud.y[i], cloud.z[i], IsBad(m, i) ? 1.0f : 0.0f});
+      }
+      const std::string name = in.name + "_frame" + std::to_string(f) + ".f32";
+      WriteFileAtomically(dir / name,
+                          std::string_view(reinterpret_cast<const char*>(rows.data()),
+                                           rows.size() * sizeof(float)));
+      files.push_back(name);
+    }
+    for (const auto& [label, options] : configs) {
+      std::int64_t bad = 0, good = 0, bad_removed = 0, good_lost = 0;
+      for (const MetricFrame& m : in.ready) {
+        const Image<PixelFlags> flags = ApplyFilters(m, in.rays, options);
+        for (std::size_t i = 0; i < m.radial_distance_m.size(); ++i) {
+          if (!m.flags[i].Valid() || !std::isfinite(m.radial_distance_m[i])) continue;
+          const bool removed = !flags[i].Valid();
+          if (IsBad(m, i)) {
+            ++bad;
+            bad_removed += removed ? 1 : 0;
+          } else {
+            ++good;
+            good_lost += removed ? 1 : 0;
+          }
+        }
+      }
+      std::vector<Workspace> ws(1);
+      ws[0].input = &in;
+      ws[0].ready = in.ready;
+      const FilterSetOptions o = options;
+      const double ns = TimePerCall(
+          ws, 1,
+          [o](Workspace& w, std::size_t i) {
+            const Image<PixelFlags> f = ApplyFilters(w.ready[i % w.ready.size()], w.input->rays, o);
+            Sink(w, f.data());
+          },
+          min_time_s);
+      res.push_back({{"method", label},
+                     {"resolution", in.name},
+                     {"frames", in.ready.size()},
+                     {"ms_per_frame", ns * 1e-6},
+                     {"bad_points", bad},
+                     {"good_points", good},
+                     {"bad_removed", bad_removed},
+                     {"good_lost", good_lost}});
+    }
+    out["clouds"][in.name] = files;
+  }
+  out["tofcam"] = res;
+  WriteFileAtomically(dir / "tofcam_filters.json", out.dump(2) + "\n");
+}
+
+std::string Machine() {
+  std::string cpu = "unknown";
+  std::ifstream f("/proc/cpuinfo");
+  for (std::string line; std::getline(f, line);) {
+    if (line.rfind("model name", 0) == 0) {
+      cpu = line.substr(line.find(':') + 2);
+      break;
+    }
+  }
+  return cpu + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads";
+}
+
+void RunBench(const BenchOptions& o) {
+  if (o.frames < 1 || o.frames > 1000) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--frames must be in [1, 1000], got " + std::to_string(o.frames));
+  }
+  if (o.threads != 0 && o.threads != 1 && o.threads != 2) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--threads must be 1 or 2, got " + std::to_string(o.threads));
+  }
+  if (!(o.min_time_s > 0 && o.min_time_s <= 60)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--min-time-s must be in (0, 60], got " + std::to_string(o.min_time_s));
+  }
+  std::vector<int> thread_counts;
+  if (o.threads != 2) thread_counts.push_back(1);
+  if (o.threads != 1) thread_counts.push_back(2);
+  auto progress = [&](const std::string& s) {
+    std::fprintf(stderr, "bench: %s\n", s.c_str());
+  };
+
+  json report;
+  report["machine"] = Machine();
+  report["compiler"] = __VERSION__;
+  report["frames"] = o.frames;
+  report["min_time_s"] = o.min_time_s;
+
+  // Memory bandwidth: a 256 MiB memcpy (read + write counted).
+  {
+    constexpr std::size_t kBytes = std::size_t{256} << 20;
+    std::vector<Workspace> ws(2);
+    for (auto& w : ws) {
+      w.copy_src.assign(kBytes, 1);
+      w.copy_dst.assign(kBytes, 0);
+    }
+    for (int t : thread_counts) {
+      const double ns = MemcpyNs(ws, t, kBytes, std::max(o.min_time_s, 0.5));
+      report["memory_bandwidth_gb_s"][std::to_string(t) + "_threads"] = 2.0 * kBytes / ns * t;
+    }
+  }
+
+  const std::pair<int, int> sizes[] = {{160, 124}, {640, 480}, {1024, 1024}};
+  std::vector<Input> inputs;
+  for (const auto& [w, h] : sizes) {
+    progress("simulating " + std::to_string(o.frames) + " frames at " + std::to_string(w) + "x" +
+             std::to_string(h));
+    inputs.push_back(MakeInput(w, h, o.frames));
+  }
+
+  std::vector<Row> rows;
+  const std::vector<Stage> stages = MakeStages();
+  double max_bpp = 0;
+  for (const Stage& s : stages) max_bpp = std::max(max_bpp, s.bytes_per_pixel);
+  for (const Input& in : inputs) {
+    progress("stages at " + in.name);
+    std::vector<Workspace> ws(2);
+    const auto copy_max = static_cast<std::size_t>(max_bpp / 2 * static_cast<double>(in.pixels()));
+    for (auto& w : ws) InitWorkspace(w, in, copy_max);
+    std::map<std::pair<int, std::size_t>, double> floor_cache;
+    for (const Stage& s : stages) {
+      for (int t : thread_counts) {
+        if (t > 1 && !s.threadable) continue;
+        Row r;
+        r.stage = s.name;
+        r.resolution = in.name;
+        r.pixels = in.pixels();
+        r.threads = t;
+        r.ns_per_frame = TimePerCall(ws, t, s.run, o.min_time_s) / s.frames_per_call;
+        r.bytes_per_pixel = s.bytes_per_pixel;
+        // A memcpy of N bytes reads N and writes N: N = traffic / 2 gives the same traffic.
+        const auto bytes =
+            static_cast<std::size_t>(s.bytes_per_pixel / 2 * static_cast<double>(in.pixels()));
+        auto it = floor_cache.find({t, bytes});
+        if (it == floor_cache.end()) {
+          it = floor_cache.emplace(std::pair{t, bytes}, MemcpyNs(ws, t, bytes, o.min_time_s))
+                   .first;
+        }
+        r.memcpy_ns = it->second;
+        if (t > 1) r.note = "2 frames concurrently";
+        rows.push_back(r);
+      }
+    }
+    if (!o.skip_recording) {
+      const std::filesystem::path dir = std::filesystem::temp_directory_path();
+      RecordingOptions def;
+      RecordingOptions raw;
+      raw.compression_level = 0;
+      raw.flush_each_frame = false;
+      for (const auto& [label, ro] : {std::pair{"default: deflate 4, flush", def},
+                                      std::pair{"uncompressed, no flush", raw}}) {
+        const auto [wns, rns] = TimeRecording(in, dir, ro);
+        // Frame with truth: 3 x 2 registers + 4 truth distance + 2 causes + 4 sigma bytes.
+        rows.push_back({std::string("recording write (") + label + ")", in.name, in.pixels(), 1,
+                        wns, 0, 0, "HDF5 to " + dir.string()});
+        rows.push_back({std::string("recording read (") + label + ")", in.name, in.pixels(), 1,
+                        rns, 0, 0, "HDF5 from " + dir.string()});
+      }
+    }
+  }
+
+  std::vector<SimRow> sim_rows;
+  if (!o.skip_simulator) {
+    progress("simulator");
+    const double t = std::max(o.min_time_s * 4, 1.0);
+    for (int th : thread_counts) {
+      sim_rows.push_back({"SR-2 pavilion, moving camera, 2x2 supersampling, all effects", th,
+                          SimulatorFps(MovingPavilion(), sim::ResolveCameraModel("sr2"), th, t)});
+      sim_rows.push_back({"SR-2 pavilion, static camera", th,
+                          SimulatorFps(sim::LoadBuiltinScene("pavilion"),
+                                       sim::ResolveCameraModel("sr2"), th, t)});
+      sim_rows.push_back(
+          {"generic 640x480 model, pavilion, moving camera", th,
+           SimulatorFps(MovingPavilion(), sim::ResolveCameraModel("generic640x480"), th, t)});
+    }
+  }
+
+  if (!o.export_peers_dir.empty()) {
+    progress("exporting clouds for the peer comparison to " + o.export_peers_dir);
+    json peers;
+    peers["bad_error_m"] = 0.05;
+    ExportPeers(inputs, o.export_peers_dir, o.min_time_s, peers);
+  }
+
+  if (o.json_output) {
+    json jr = json::array();
+    for (const Row& r : rows) {
+      json j = {{"stage", r.stage},
+                {"resolution", r.resolution},
+                {"pixels", r.pixels},
+                {"threads", r.threads},
+                {"us_per_frame", r.ns_per_frame * 1e-3},
+                {"ns_per_pixel", r.ns_per_frame / static_cast<double>(r.pixels)},
+                {"frames_per_s", 1e9 / r.ns_per_frame}};
+      if (r.bytes_per_pixel > 0) {
+        j["traffic_bytes_per_pixel"] = r.bytes_per_pixel;
+        j["memcpy_us"] = r.memcpy_ns * 1e-3;
+        j["ratio_to_memcpy"] = r.ns_per_frame / r.memcpy_ns;
+      }
+      if (!r.note.empty()) j["note"] = r.note;
+      jr.push_back(j);
+    }
+    report["stages"] = jr;
+    json js = json::array();
+    for (const SimRow& s : sim_rows) {
+      js.push_back({{"scene", s.name}, {"threads", s.threads}, {"frames_per_s", s.frames_per_s}});
+    }
+    report["simulator"] = js;
+    std::printf("%s\n", report.dump(2).c_str());
+    return;
+  }
+
+  std::printf("tofcam bench  (%s; %s; %d simulated frames per resolution, seed 7)\n",
+              report["machine"].get<std::string>().c_str(), __VERSION__, o.frames);
+  for (const auto& [k, v] : report["memory_bandwidth_gb_s"].items()) {
+    std::printf("memory bandwidth (256 MiB memcpy, read + write), %s: %.1f GB/s\n", k.c_str(),
+                v.get<double>());
+  }
+  std::string last;
+  for (const Row& r : rows) {
+    if (r.resolution != last) {
+      last = r.resolution;
+      std::printf("\n== %s (%lld px)\n%-40s %3s %11s %8s %10s %11s %7s\n", r.resolution.c_str(),
+                  static_cast<long long>(r.pixels), "stage", "thr", "us/frame", "ns/px",
+                  "frames/s", "memcpy us", "ratio");
+    }
+    std::printf("%-40s %3d %11.1f %8.2f %10.0f", r.stage.c_str(), r.threads,
+                r.ns_per_frame * 1e-3, r.ns_per_frame / static_cast<double>(r.pixels),
+                1e9 / r.ns_per_frame);
+    if (r.bytes_per_pixel > 0) {
+      std::printf(" %11.1f %7.1f\n", r.memcpy_ns * 1e-3, r.ns_per_frame / r.memcpy_ns);
+    } else {
+      std::printf(" %11s %7s\n", "-", "-");
+    }
+  }
+  std::printf("\n2-thread rows: two frames processed concurrently (no stage has a threaded path);\n"
+              "time is wall time per frame. memcpy: a copy with the stage's minimal memory "
+              "traffic.\n");
+  if (!sim_rows.empty()) {
+    std::printf("\n== simulator (SimulatedCamera::Grab)\n%-60s %3s %10s\n", "scene", "thr",
+                "frames/s");
+    for (const SimRow& s : sim_rows) {
+      std::printf("%-60s %3d %10.1f\n", s.name.c_str(), s.threads, s.frames_per_s);
+    }
+  }
+}
+
+void SetupBenchCommand(CLI::App& app) {
+  auto opts = std::make_shared<BenchOptions>();
+  CLI::App* sub = app.add_subcommand(
+      "bench", "Time every pipeline stage and the simulator on simulated frames (see "
+               "docs/benchmarks.md)");
+  sub->add_flag("--json", opts->json_output, "Print JSON instead of the table");
+  sub->add_option("--frames", opts->frames, "Simulated frames per resolution, 1..1000")
+      ->capture_default_str();
+  sub->add_option("--threads", opts->threads, "1 or 2 only (default: both)");
+  sub->add_option("--min-time-s", opts->min_time_s, "Measuring time per figure, s (0, 60]")
+      ->capture_default_str();
+  sub->add_option("--export-peers", opts->export_peers_dir,
+                  "Also write clouds and tofcam filter results for bench/peers to this folder");
+  sub->add_flag("--no-simulator", opts->skip_simulator, "Skip the simulator frames/s");
+  sub->add_flag("--no-recording", opts->skip_recording, "Skip the recording write/read");
+  sub->callback([opts] { RunBench(*opts); });
+}
+
+TOFCAM_REGISTER_COMMAND("bench", SetupBenchCommand);
+
+}  // namespace
+}  // namespace tofcam::cli

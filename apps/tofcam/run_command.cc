@@ -1,0 +1,271 @@
+// `tofcam run`: camera -> pipeline -> controller in a loop (docs/pipeline.md). Frame t's
+// controller output is set on the camera before frame t + 1 is grabbed. Ctrl-C finishes the
+// current frame, writes the outputs and exits 0. Status on stderr about once a second; per-frame
+// statistics in <out>/frames.csv, the run in <out>/summary.json.
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "camera_source.h"
+#include "commands.h"
+#include "tofcam/core/atomic_file.h"
+#include "tofcam/core/error.h"
+#include "tofcam/io/cloud_io.h"
+#include "tofcam/io/pipeline_config.h"
+#include "tofcam/io/png.h"
+#include "tofcam/pipeline/pipeline.h"
+
+namespace tofcam::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+std::atomic<bool> g_interrupted{false};
+
+extern "C" void OnSigint(int /*signal*/) { g_interrupted.store(true); }
+
+// Installs the SIGINT handler for the lifetime of the object and restores the previous one.
+class SigintGuard {
+ public:
+  SigintGuard() {
+    g_interrupted.store(false);
+    previous_ = std::signal(SIGINT, OnSigint);
+  }
+  ~SigintGuard() { std::signal(SIGINT, previous_ == SIG_ERR ? SIG_DFL : previous_); }
+  SigintGuard(const SigintGuard&) = delete;
+  SigintGuard& operator=(const SigintGuard&) = delete;
+
+ private:
+  void (*previous_)(int) = SIG_DFL;
+};
+
+struct RunOptions {
+  std::string camera;
+  long long frames = 0;
+  std::string config;
+  std::string calibration;
+  std::string controller;
+  std::string out;
+  int png_every = 0;
+  int ply_every = 0;
+  bool print_config = false;
+  CameraSourceOptions source;
+};
+
+// Milli-units for the status line; "-" for NaN.
+std::string Milli(double value_m) {
+  if (!std::isfinite(value_m)) return "-";
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.1f mm", value_m * 1e3);
+  return buffer;
+}
+
+std::string FrameName(std::uint64_t index, const char* suffix) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "frame_%06llu%s", static_cast<unsigned long long>(index),
+                suffix);
+  return buffer;
+}
+
+nlohmann::json Real(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+PipelineOptions ResolveOptions(const RunOptions& o) {
+  PipelineOptions options = o.config.empty() ? PipelineOptions{} : LoadPipelineConfig(o.config);
+  if (!o.calibration.empty()) options.calibration_file = o.calibration;
+  if (!o.controller.empty()) {
+    if (o.controller == "none") {
+      options.controller_enabled = false;
+    } else {
+      options.controller_enabled = true;
+      options.controller.kind = ParseControllerKind(o.controller);
+    }
+  }
+  options.Validate();
+  return options;
+}
+
+void RunRun(const RunOptions& o) {
+  PipelineOptions options = ResolveOptions(o);
+  if (o.print_config) {
+    std::fputs(PipelineConfigToYaml(options).c_str(), stdout);
+    return;
+  }
+  if (o.camera.empty()) throw Error(ErrorCode::kInvalidArgument, "--camera is required");
+  if (o.out.empty()) throw Error(ErrorCode::kInvalidArgument, "--out is required");
+  if (o.frames <= 0) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--frames " + std::to_string(o.frames) + " must be >= 1");
+  }
+  if (o.png_every < 0 || o.ply_every < 0) {
+    throw Error(ErrorCode::kInvalidArgument, "--png-every and --ply-every must be >= 0");
+  }
+
+  const fs::path out(o.out);
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec || !fs::is_directory(out)) {
+    throw Error(ErrorCode::kIo, "--out " + o.out + ": cannot create the directory" +
+                                    (ec ? ": " + ec.message() : std::string()));
+  }
+  const fs::path csv_path = out / "frames.csv";
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv(std::fopen(csv_path.c_str(), "w"),
+                                                      &std::fclose);
+  if (!csv) {
+    throw Error(ErrorCode::kIo, "cannot write " + csv_path.string() + ": " + std::strerror(errno));
+  }
+
+  std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
+  LoadPipelineCalibration(options, camera->Info());
+  Pipeline pipeline(options, camera->Info());
+
+  bool controlling = options.controller_enabled;
+  if (controlling) {
+    try {
+      camera->SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
+    } catch (const Error& e) {
+      if (e.code() != ErrorCode::kUnsupported) throw;
+      std::fprintf(stderr, "run: the camera's integration time is fixed (%s); not controlling\n",
+                   e.what());
+      controlling = false;
+    }
+  }
+
+  std::fprintf(csv.get(), "frame,%s,elapsed_s\n", FrameStatsCsvHeader().c_str());
+  SigintGuard sigint;
+  RunStatsAccumulator accumulator;
+  PipelineResult result;
+  const Clock::time_point start = Clock::now();
+  Clock::time_point last_status = start;
+  Clock::time_point last_flush = start;
+  long long status_frames = 0;
+  long long done = 0;
+  bool end_of_stream = false;
+
+  while (done < o.frames && !g_interrupted.load()) {
+    std::optional<Frame> frame = camera->Grab();
+    if (!frame) {
+      end_of_stream = true;
+      break;
+    }
+    pipeline.Process(*frame, result);
+    if (controlling) camera->SetIntegrationTimeRegister(result.next_integration_register);
+    const FrameStats& s = result.stats;
+    accumulator.Add(s);
+    const Clock::time_point now = Clock::now();
+    const double elapsed_s = std::chrono::duration<double>(now - start).count();
+    std::fprintf(csv.get(), "%lld,%s,%.6f\n", done, FrameStatsCsvRow(s).c_str(), elapsed_s);
+
+    if (o.png_every > 0 && done % o.png_every == 0) {
+      WritePngRgb8(out / FrameName(done, "_raw.png"), pipeline.RenderRaw(result));
+      WritePngRgb8(out / FrameName(done, "_filtered.png"), pipeline.RenderFiltered(result));
+    }
+    if (o.ply_every > 0 && done % o.ply_every == 0 && !result.cloud.empty()) {
+      WritePly(out / FrameName(done, ".ply"), result.cloud, PlyFormat::kBinary,
+               /*only_valid=*/true);
+    }
+    ++done;
+    ++status_frames;
+
+    if (now - last_flush >= std::chrono::milliseconds(500)) {
+      std::fflush(csv.get());
+      last_flush = now;
+    }
+    const double since_status = std::chrono::duration<double>(now - last_status).count();
+    if (since_status >= 1.0 || done == o.frames) {
+      std::fprintf(stderr,
+                   "run: frame %lld/%lld  %.1f frames/s  register %d (%.2f ms)  intensity %.0f  "
+                   "valid %.1f%%  mean dL %s  RMSE %s\n",
+                   done, o.frames, status_frames / std::max(since_status, 1e-9),
+                   s.integration_time_register, s.integration_time_us * 1e-3, s.mean_intensity,
+                   s.valid_fraction * 100.0, Milli(s.mean_delta_l_m).c_str(),
+                   s.has_truth ? Milli(s.rmse_m).c_str() : "n/a");
+      last_status = now;
+      status_frames = 0;
+    }
+  }
+  if (std::fflush(csv.get()) != 0) {
+    throw Error(ErrorCode::kIo, "cannot write " + csv_path.string() + ": " + std::strerror(errno));
+  }
+  const double elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
+  const RunSummary summary = accumulator.Summary();
+
+  nlohmann::json json;
+  json["camera"] = o.camera;
+  json["camera_model"] = camera->Info().model;
+  json["controller"] = controlling ? std::string(pipeline.ControllerName()) : "none";
+  json["calibrated"] = options.calibration.has_value();
+  json["frames"] = summary.frames;
+  json["mean_valid_fraction"] = Real(summary.mean_valid_fraction);
+  json["mean_delta_l_m"] = Real(summary.mean_delta_l_m);
+  json["mean_intensity"] = Real(summary.mean_intensity);
+  json["has_truth"] = summary.has_truth;
+  json["rmse_m"] = Real(summary.rmse_m);
+  json["bad_removed_fraction"] = Real(summary.bad_removed_fraction);
+  json["good_kept_fraction"] = Real(summary.good_kept_fraction);
+  json["bad_pixels"] = summary.bad_pixels;
+  json["good_pixels"] = summary.good_pixels;
+  json["bad_error_m"] = options.stats.bad_error_m;
+  json["elapsed_s"] = elapsed_s;
+  json["mean_frames_per_s"] = Real(elapsed_s > 0 ? summary.frames / elapsed_s : NAN);
+  json["interrupted"] = g_interrupted.load();
+  json["end_of_stream"] = end_of_stream;
+  WriteFileAtomically(out / "summary.json", json.dump(2) + "\n");
+
+  std::printf("run: %llu frames in %.2f s (%.1f frames/s)%s\n",
+              static_cast<unsigned long long>(summary.frames), elapsed_s,
+              elapsed_s > 0 ? summary.frames / elapsed_s : 0.0,
+              g_interrupted.load() ? ", interrupted" : (end_of_stream ? ", end of stream" : ""));
+  std::printf("run: mean valid %.1f%%, mean dL %s", summary.mean_valid_fraction * 100.0,
+              Milli(summary.mean_delta_l_m).c_str());
+  if (summary.has_truth) {
+    std::printf(", RMSE of kept pixels %s, bad pixels removed %.1f%%, good pixels kept %.1f%%",
+                Milli(summary.rmse_m).c_str(), summary.bad_removed_fraction * 100.0,
+                summary.good_kept_fraction * 100.0);
+  }
+  std::printf("\nrun: wrote %s and %s\n", csv_path.c_str(), (out / "summary.json").c_str());
+}
+
+void SetupRunCommand(CLI::App& app) {
+  auto o = std::make_shared<RunOptions>();
+  CLI::App* sub = app.add_subcommand(
+      "run", "Camera -> pipeline -> integration-time controller in a loop (Ctrl-C stops)");
+  sub->add_option("--camera", o->camera, "Frame source: " + CameraSourceHelp());
+  sub->add_option("--frames", o->frames, "Frames to process (>= 1)");
+  sub->add_option("--config", o->config, "Pipeline configuration (YAML; see --print-config)");
+  sub->add_option("--calibration", o->calibration,
+                  "Calibration file (tofcam calibrate); overrides the config's");
+  sub->add_option("--controller", o->controller,
+                  "may-proportional, may-incremental, vendor-histogram, fixed or none; "
+                  "overrides the config's");
+  sub->add_option("--out", o->out, "Output directory (frames.csv, summary.json, PNG, PLY)");
+  sub->add_option("--png-every", o->png_every,
+                  "Write false-colour PNGs (raw and filtered) of every K-th frame; 0 = none")
+      ->capture_default_str();
+  sub->add_option("--ply-every", o->ply_every,
+                  "Write the point cloud (valid points, binary PLY) of every K-th frame; 0 = none")
+      ->capture_default_str();
+  sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
+  sub->add_flag("--real-time", o->source.real_time, "Throttle to the camera's frame rate");
+  sub->add_flag("--print-config", o->print_config,
+                "Print every pipeline option (defaults, or --config's values) as YAML and exit");
+  sub->callback([o] { RunRun(*o); });
+}
+
+TOFCAM_REGISTER_COMMAND("run", SetupRunCommand);
+
+}  // namespace
+}  // namespace tofcam::cli

@@ -1,0 +1,83 @@
+#pragma once
+/// \file
+/// Stage 3: the predicted inaccuracy ΔL of every pixel (paper section III-B) and the noise
+/// calibration that ties it to the measured temporal standard deviation.
+///
+/// Eq. 2 and 3:  ΔL = scale * L / sqrt(8) * sqrt(I) / (2 A),  L = c / (2 f_mod),
+/// with A and I in register units (0..65532) and ΔL in metres.
+///
+/// Eq. 2 holds up to a constant that depends on how A and I are scaled. For ideal 4-tap sampling
+/// with shot noise, σ_d = L sqrt(B) / (2 sqrt(2) π A) with B and A in electrons (tof-notes §1).
+/// With registers = g * electrons (I = g B, A_reg = g A) this is σ_d = (2 sqrt(g) / π) ΔL, so the
+/// scale a noise calibration finds is 2 sqrt(g) / π for a camera whose registers count g units
+/// per electron (0.637 for g = 1). FitDeltaLScale measures it; see docs/calibration.md.
+
+#include <span>
+
+#include "tofcam/core/frame.h"
+
+namespace tofcam {
+
+struct AccuracyOptions {
+  /// Multiplies eq. 2; 1 is the paper's formula, FitDeltaLScale() measures the camera's value.
+  /// Valid range (0, 1e6].
+  double scale = 1.0;
+  /// Amplitude-only form for sources without an intensity channel: I is replaced by
+  /// intensity_per_amplitude * A, i.e. ΔL = scale L / sqrt(8) sqrt(k A) / (2 A). The default 2.5
+  /// is 1 / 0.4, the offset-to-amplitude ratio of a demodulation contrast of 0.4 without
+  /// background light; background raises the true ratio, so the form is optimistic under lamps
+  /// or sunlight. Valid range (0, 1e6].
+  double intensity_per_amplitude = 2.5;
+
+  /// Throws Error(kInvalidArgument) naming the field when a value is out of range or not finite.
+  void Validate() const;
+};
+
+/// ΔL in metres per pixel (eq. 2, times options.scale), with L of the frame's modulation
+/// frequency. Pixels with A <= 0 (or NaN) get +inf; intensities below 0 count as 0. Flags are not
+/// read or changed: invalid pixels get the value of the formula too (the threshold filter reads
+/// flags and ΔL together). Uses the amplitude-only form when `!frame.has_intensity()`.
+/// Throws Error(kInvalidArgument) for bad options, an empty frame or channels of different sizes.
+[[nodiscard]] Image<float> ComputeDeltaL(const MetricFrame& frame,
+                                         const AccuracyOptions& options = {});
+
+/// Same as ComputeDeltaL, into `out` (reused when it has the frame's size), e.g.
+/// `ComputeDeltaLInto(frame, options, frame.delta_l_m)`.
+void ComputeDeltaLInto(const MetricFrame& frame, const AccuracyOptions& options, Image<float>& out);
+
+/// The result of a noise calibration.
+struct DeltaLScaleFit {
+  /// Fitted factor s in σ = s * ΔL(scale = 1): least squares of σ² on ΔL² through the origin
+  /// (sample variance is an unbiased estimate of σ², so this fit has no small-sample bias).
+  double scale = 0.0;
+  double median_ratio = 0.0;  ///< Median over pixels of σ / ΔL (robust cross-check).
+  /// Coefficient of determination of σ against scale * ΔL over the pixels used (1 = perfect).
+  double r_squared = 0.0;
+  /// Root mean square of (σ - scale * ΔL) / (scale * ΔL): the spread of the model around the fit.
+  double relative_rms = 0.0;
+  int pixels_used = 0;  ///< Pixels valid in every frame with finite ΔL.
+  int frames = 0;       ///< Frames the temporal σ was computed from.
+};
+
+struct DeltaLFitOptions {
+  /// Pixels whose mean predicted ΔL exceeds this are left out (near-dark pixels whose phase is
+  /// almost uniform, where σ saturates near L / sqrt(12) and no longer follows eq. 2). Metres,
+  /// (0, inf).
+  double max_delta_l_m = 0.3;
+  /// At least this many pixels must remain, [1, 2^28].
+  int min_pixels = 10;
+  /// Options for ΔL during the fit; `scale` is ignored (the fit is for scale 1).
+  AccuracyOptions accuracy;
+
+  void Validate() const;
+};
+
+/// Noise calibration: the per-pixel temporal σ of the radial distance over `frames` (a static
+/// scene, same integration time) against the mean ΔL of eq. 2 with scale 1. Temporal σ is taken
+/// around the circular mean, so pixels near the 0 / L seam are handled. Pixels invalid in any
+/// frame are skipped. Throws Error(kInvalidArgument) with fewer than 3 frames, frames of different
+/// sizes or modulation frequencies, or fewer than min_pixels usable pixels.
+[[nodiscard]] DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
+                                            const DeltaLFitOptions& options = {});
+
+}  // namespace tofcam

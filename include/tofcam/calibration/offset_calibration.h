@@ -1,0 +1,75 @@
+#pragma once
+/// \file
+/// Stage 2: per-pixel distance calibration (paper section II-B) and its application.
+///
+/// The offset matrix o holds, per pixel, measured minus true radial ("polar") distance in metres
+/// at the calibration wall. Eq. 1 corrects a measurement m exactly as printed:
+///     l = (m - o + r_e) mod r_e,   r_e = L = c / (2 f_mod) of the frame,
+/// which keeps l in [0, r_e) where a plain subtraction could go negative. An optional
+/// distance-dependent correction (a lookup table over the eq.-1-corrected distance, fitted on a
+/// wall sweep) then removes the periodic "wiggling" error:
+///     l' = (l - g(l) + r_e) mod r_e.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tofcam/core/frame.h"
+
+namespace tofcam {
+
+/// Distance-dependent correction g(l): error (measured minus true, metres) as a function of the
+/// eq.-1-corrected distance l, sampled at uniform knots start_m + k * step_m. Between knots a
+/// Catmull-Rom cubic interpolates (exact for quadratics, smooth for the sinusoidal wiggling);
+/// outside [first knot, last knot] the end value holds.
+struct DistanceCorrection {
+  double start_m = 0.0;             ///< Distance of knot 0, m, >= 0.
+  double step_m = 0.05;             ///< Knot spacing, m, > 0.
+  std::vector<float> correction_m;  ///< g at each knot, m; at least 2 knots, all finite.
+
+  /// g(l) in metres; `distance_m` any finite value.
+  [[nodiscard]] double Evaluate(double distance_m) const noexcept;
+  /// Throws Error(kInvalidArgument) naming the field for a malformed table.
+  void Validate() const;
+};
+
+/// A per-pixel calibration of one camera at one modulation frequency.
+struct OffsetCalibration {
+  static constexpr int kVersion = 1;  ///< Current file-format version.
+
+  int version = kVersion;
+  std::string camera_model;               ///< Must match CameraInfo::model.
+  int width = 0;                          ///< Pixels per row.
+  int height = 0;                         ///< Rows.
+  double modulation_frequency_hz = 20e6;  ///< Frequency the offsets were measured at (> 0).
+  double integration_time_us = 0.0;   ///< Integration time at the wall (as set by the controller).
+  int integration_time_register = 0;  ///< Its register value.
+  std::int64_t created_unix_s = 0;    ///< Creation time, seconds since 1970 UTC.
+  double wall_distance_m = 0.0;       ///< Perpendicular camera-to-wall distance at calibration, m.
+  double wall_normal[3] = {0.0, 0.0, 1.0};  ///< Wall normal in the camera frame (unit, z > 0).
+  int frames_averaged = 0;                  ///< Frames averaged per pixel.
+  /// o[i][j]: measured minus true radial distance, m, in (-L/2, L/2); width x height.
+  Image<float> offset_m;
+  /// Bits OR-ed into every corrected frame: kInvalid where a pixel could not be calibrated
+  /// (no valid measurement at the wall). Empty means every pixel is calibrated.
+  Image<PixelFlags> pixel_flags;
+  /// Distance-dependent correction from a wall sweep; absent for the paper's offset-only form.
+  std::optional<DistanceCorrection> distance_correction;
+
+  /// Throws Error(kInvalidArgument) naming the field for sizes, NaNs or ranges out of order.
+  void Validate() const;
+};
+
+/// Applies eq. 1 (then g, if present) to every pixel. Pixels flagged kInvalid (no measurement)
+/// pass through untouched, flags kept; other flagged pixels (e.g. saturated) are corrected too,
+/// their flags kept, so displays of raw data stay calibrated. The calibration's pixel_flags are
+/// OR-ed in. Throws Error(kMismatch) when the frame's size or
+/// modulation frequency differs from the calibration's.
+[[nodiscard]] MetricFrame ApplyCalibration(const MetricFrame& frame,
+                                           const OffsetCalibration& calibration);
+
+/// In-place form of ApplyCalibration for a pipeline that owns its frame (no copy).
+void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibration);
+
+}  // namespace tofcam

@@ -1,0 +1,162 @@
+#pragma once
+/// \file
+/// Stage 4: online integration-time control (paper section III-A). Frame t sets the register for
+/// frame t + 1: `int next = controller->Update(metric_frame); camera.SetIntegrationTimeRegister(
+/// next);`.
+///
+/// The controlled quantity is the mean intensity Ī_t over the region of interest and over the
+/// pixels whose flags have none of `ControllerOptions::exclude_flags` (by default only kInvalid:
+/// saturated pixels must count, they are what tells the controller to back off). For frames
+/// without an intensity channel the amplitude is averaged instead and I_A must be given in
+/// amplitude units. Intensity and I_A are in register units (0..65532); the control variable is
+/// the integration-time register (SR-2: 1..255, 255 µs per step).
+///
+///  - MayProportional: exactly the printed law  c_{t+1} = -V_p * D_t + c_0,  D_t = Ī_t - I_A,
+///    rounded to the nearest register and clamped to [min_register, max_register]. Stateless:
+///    in this position form the steady state keeps an offset unless c_0 is right.
+///  - MayIncremental:  c_{t+1} = c_t - V_p * D_t. c_t is kept as a real number between frames
+///    (so small corrections accumulate instead of rounding away) and clamped to the bounds
+///    (anti-windup); the register is its nearest integer.
+///  - VendorHistogram: tof-notes §4 (CSEM/MESA): intensity reduced to 8 bits (I >> 8),
+///    histogram, x = the smallest 8-bit value that at most percent_over_pos % of the pixels
+///    exceed; our step law (the vendor's is unpublished) is a damped multiplicative step
+///    c_{t+1} = c_t * (1 + vendor_gain * (desired_pos / max(x, 1) - 1)), because intensity is
+///    about proportional to integration time (a full step would jump to the predicted register),
+///    limited to ±vendor_max_step_register per frame, no change while |x - desired_pos| <=
+///    vendor_deadband, clamped to the bounds.
+///  - Fixed: always c_0.
+///
+/// A frame with no usable pixel in the ROI leaves the register unchanged.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+
+#include "tofcam/core/frame.h"
+
+namespace tofcam {
+
+enum class ControllerKind { kMayProportional, kMayIncremental, kVendorHistogram, kFixed };
+
+/// "may-proportional", "may-incremental", "vendor-histogram", "fixed".
+[[nodiscard]] std::string_view ControllerKindName(ControllerKind kind) noexcept;
+/// Inverse of ControllerKindName; throws Error(kInvalidArgument) naming the unknown kind.
+[[nodiscard]] ControllerKind ParseControllerKind(std::string_view name);
+
+/// Rectangle of pixels, (row, col) of its top-left corner and its size. rows == 0 or cols == 0
+/// means the whole image. A ROI that leaves the frame is clipped to it.
+struct RegionOfInterest {
+  int row = 0;
+  int col = 0;
+  int rows = 0;
+  int cols = 0;
+};
+
+struct ControllerOptions {
+  ControllerKind kind = ControllerKind::kMayProportional;
+  /// I_A: intensity set point, register units, (0, 65532]. The paper: 15000..18000 worked.
+  double target_intensity = 16000.0;
+  /// V_p: registers per intensity unit, [0, 1]. The default corrects about a quarter of the
+  /// error per frame for a scene whose intensity grows by 1000 per register step.
+  double gain_register_per_intensity = 2.5e-4;
+  /// c_0: bias of the proportional law, start value of the others, Fixed's register.
+  /// [min_register, max_register].
+  int bias_register = 40;
+  int min_register = 1;    ///< Lower clamp, [1, max_register] (SR-2: 1).
+  int max_register = 255;  ///< Upper clamp, [min_register, 65535] (SR-2: 255).
+  RegionOfInterest roi;    ///< Pixels Ī_t is taken over; whole image by default.
+  /// Pixels with any of these flag bits are left out of Ī_t and of the histogram.
+  std::uint16_t exclude_flags = static_cast<std::uint16_t>(Flag::kInvalid);
+
+  // VendorHistogram (tof-notes §4; SR-3000 vendor settings by default).
+  double percent_over_pos = 10.0;     ///< percentOverPos, % of pixels above x, [0, 100).
+  int desired_pos = 45;               ///< desiredPos, 8-bit set point for x, [1, 255].
+  double vendor_gain = 0.5;           ///< Fraction of the predicted step taken per frame, (0, 1].
+  int vendor_max_step_register = 20;  ///< Largest change per frame, registers, >= 1.
+  int vendor_deadband = 2;            ///< No change while |x - desired_pos| <= this, [0, 254].
+
+  /// Throws Error(kInvalidArgument) naming the field when a value is out of range or not finite.
+  void Validate() const;
+};
+
+/// One interface for every integration-time controller.
+class IntegrationTimeController {
+ public:
+  virtual ~IntegrationTimeController() = default;
+  /// Consumes frame t (metric, flags set) and returns the register for frame t + 1, within
+  /// [min_register, max_register]. Never throws for a well-formed frame; pixels outside the
+  /// frame are ignored.
+  virtual int Update(const MetricFrame& frame) = 0;
+  /// Stable name, as ControllerKindName.
+  [[nodiscard]] virtual std::string_view Name() const = 0;
+  /// Forgets the history and continues from `current_register` (e.g. after a manual change),
+  /// clamped to the bounds.
+  virtual void Reset(int current_register) = 0;
+};
+
+/// c_{t+1} = -V_p (Ī_t - I_A) + c_0, rounded and clamped (stateless).
+class MayProportional final : public IntegrationTimeController {
+ public:
+  /// Throws Error(kInvalidArgument) for invalid options.
+  explicit MayProportional(const ControllerOptions& options);
+  int Update(const MetricFrame& frame) override;
+  [[nodiscard]] std::string_view Name() const override;
+  void Reset(int current_register) override;
+
+ private:
+  ControllerOptions options_;
+  int last_register_;
+};
+
+/// c_{t+1} = c_t - V_p (Ī_t - I_A), real-valued state clamped to the bounds, output rounded.
+class MayIncremental final : public IntegrationTimeController {
+ public:
+  explicit MayIncremental(const ControllerOptions& options);
+  int Update(const MetricFrame& frame) override;
+  [[nodiscard]] std::string_view Name() const override;
+  void Reset(int current_register) override;
+
+ private:
+  ControllerOptions options_;
+  double state_;
+};
+
+/// The CSEM/MESA 8-bit histogram auto-exposure with the damped multiplicative step above.
+class VendorHistogram final : public IntegrationTimeController {
+ public:
+  explicit VendorHistogram(const ControllerOptions& options);
+  int Update(const MetricFrame& frame) override;
+  [[nodiscard]] std::string_view Name() const override;
+  void Reset(int current_register) override;
+  /// The 8-bit value x of the last Update (-1 before the first or after an empty frame).
+  [[nodiscard]] int last_position() const noexcept { return last_position_; }
+
+ private:
+  ControllerOptions options_;
+  double state_;
+  int last_position_ = -1;
+};
+
+/// Always returns c_0 (bias_register).
+class Fixed final : public IntegrationTimeController {
+ public:
+  explicit Fixed(const ControllerOptions& options);
+  int Update(const MetricFrame& frame) override;
+  [[nodiscard]] std::string_view Name() const override;
+  void Reset(int current_register) override;
+
+ private:
+  int register_;
+};
+
+/// Mean of intensity (amplitude without an intensity channel) over the ROI and the pixels
+/// without `exclude_flags`; NaN when no pixel qualifies. Exposed for status lines and tests.
+[[nodiscard]] double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& roi,
+                                          std::uint16_t exclude_flags);
+
+/// Validates the options and builds the controller of `options.kind`.
+[[nodiscard]] std::unique_ptr<IntegrationTimeController> MakeController(
+    const ControllerOptions& options);
+
+}  // namespace tofcam

@@ -1,0 +1,48 @@
+#pragma once
+/// \file
+/// All filters behind one options struct, freely combined.
+
+#include "tofcam/core/camera_intrinsics.h"
+#include "tofcam/core/frame.h"
+#include "tofcam/core/image.h"
+#include "tofcam/core/pixel_flags.h"
+#include "tofcam/filters/flying_pixel_filter.h"
+#include "tofcam/filters/jump_edge_filter.h"
+#include "tofcam/filters/pixel_filters.h"
+#include "tofcam/filters/weingarten_cell_filter.h"
+
+namespace tofcam {
+
+/// One switch and one options struct per filter. Defaults: the paper's accuracy threshold and
+/// the saturation rule on, everything else off.
+struct FilterSetOptions {
+  bool range_enabled = false;
+  RangeOptions range;
+  bool amplitude_enabled = false;
+  AmplitudeThresholdOptions amplitude;
+  bool saturation_enabled = true;
+  SaturationOptions saturation;
+  bool accuracy_enabled = true;
+  AccuracyThresholdOptions accuracy;
+  bool flying_pixel_enabled = false;
+  FlyingPixelOptions flying_pixel;
+  bool jump_edge_enabled = false;
+  JumpEdgeOptions jump_edge;
+  bool weingarten_enabled = false;
+  WeingartenCellOptions weingarten;
+
+  /// Validates the options of every enabled filter.
+  void Validate() const;
+};
+
+/// Runs the enabled filters in this order: the per-pixel ones (range, amplitude, saturation,
+/// accuracy), then flying pixel, jump edge and Weingarten cells. Each neighbourhood filter sees
+/// `frame.flags` plus everything raised before it as "already rejected", so it ignores those
+/// neighbours; the cell filter comes last because it counts the points that survived. Returns
+/// the union of the flags raised (not `frame.flags`); merge it with MergeFlags(). Throws like
+/// the individual filters (e.g. kInvalidArgument when the accuracy filter is enabled and
+/// `frame.delta_l_m` is empty, kMismatch when `rays` has another size).
+[[nodiscard]] Image<PixelFlags> ApplyFilters(const MetricFrame& frame, const RayTable& rays,
+                                             const FilterSetOptions& options);
+
+}  // namespace tofcam

@@ -1,0 +1,137 @@
+#pragma once
+/// \file
+/// The paper's pipeline in one object: registers -> metric (stage 1) -> per-pixel calibration,
+/// eq. 1 (stage 2) -> ΔL, eq. 2 (stage 3) -> filters (stage 5) -> integration-time controller
+/// (stage 4; frame t sets the register of frame t + 1) -> organised point cloud (stage 6), plus
+/// per-frame statistics. False colour (stage 7) is rendered on request, for display only.
+/// See docs/pipeline.md.
+///
+/// Typical loop:
+///     Pipeline pipeline(options, camera.Info());
+///     camera.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
+///     PipelineResult result;
+///     while (auto frame = camera.Grab()) {
+///       pipeline.Process(*frame, result);
+///       camera.SetIntegrationTimeRegister(result.next_integration_register);
+///     }
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "tofcam/accuracy/delta_l.h"
+#include "tofcam/calibration/offset_calibration.h"
+#include "tofcam/cloud/point_cloud.h"
+#include "tofcam/color/false_color.h"
+#include "tofcam/control/integration_time_controller.h"
+#include "tofcam/core/camera.h"
+#include "tofcam/core/camera_intrinsics.h"
+#include "tofcam/core/frame.h"
+#include "tofcam/core/rgb.h"
+#include "tofcam/filters/filter_set.h"
+#include "tofcam/pipeline/frame_stats.h"
+#include "tofcam/pipeline/metric_conversion.h"
+
+namespace tofcam {
+
+/// Every stage's options. Defaults: no calibration, ΔL on, the paper's accuracy threshold and
+/// saturation filters on, the paper's P-controller (MayProportional) on, point cloud on.
+struct PipelineOptions {
+  MetricConversionOptions metric;
+
+  /// Calibration file (tofcam/io/calibration_file.h); "" = none. The core library does not read
+  /// files: LoadPipelineCalibration() (tofcam/io/pipeline_config.h) loads it into `calibration`.
+  std::string calibration_file;
+  /// A loaded calibration; takes precedence over `calibration_file`. Must fit the camera.
+  std::optional<OffsetCalibration> calibration;
+
+  /// Compute ΔL (eq. 2) per pixel. Needed by the accuracy filter and the mean-ΔL statistic.
+  bool accuracy_enabled = true;
+  AccuracyOptions accuracy;
+
+  FilterSetOptions filters;
+
+  /// Run the integration-time controller. Off: next_integration_register repeats the frame's.
+  bool controller_enabled = true;
+  /// Bounds are intersected with the camera's register range by the Pipeline.
+  ControllerOptions controller;
+
+  bool cloud_enabled = true;  ///< Build the organised point cloud.
+  PointCloudOptions cloud;
+
+  FalseColorOptions color;   ///< For RenderRaw / RenderFiltered.
+  bool color_legend = true;  ///< Append the legend bar to rendered images (>= 16 px wide).
+
+  FrameStatsOptions stats;  ///< Its intensity ROI / flags are replaced by the controller's.
+
+  /// Validates every stage's options (enabled or not, so a config file cannot hide a bad value);
+  /// throws Error(kInvalidArgument) naming the stage and field, e.g. "filters.accuracy: ...".
+  /// Also rejects a filter set whose accuracy filter is on while ΔL is off.
+  void Validate() const;
+};
+
+/// Output of one frame. Reused between frames by Pipeline::Process(frame, result): buffers keep
+/// their capacity, so a steady loop does not allocate beyond what the stages themselves return.
+struct PipelineResult {
+  /// Calibrated distances, amplitude, intensity, ΔL (empty when accuracy is off), flags after
+  /// all filters, info and truth of the input frame.
+  MetricFrame frame;
+  /// Flags before the filters (conversion, source and calibration flags): the "raw" view.
+  Image<PixelFlags> input_flags;
+  /// Flags raised by the filters alone.
+  Image<PixelFlags> filter_flags;
+  /// Organised cloud in the camera frame; empty when the cloud is off.
+  PointCloud cloud;
+  FrameStats stats;
+  /// Register the controller chose for the next frame, within the camera's range.
+  int next_integration_register = 0;
+};
+
+/// The pipeline for one camera. Owns its stages (options, ray table, calibration, controller).
+/// Not thread-safe; one instance per camera.
+class Pipeline {
+ public:
+  /// Validates the options against the camera: the calibration must have been made for this
+  /// camera (model, size, modulation frequency; Error(kMismatch) naming the field), a
+  /// calibration_file without a loaded calibration is Error(kInvalidArgument), the controller's
+  /// register bounds are intersected with the camera's (Error(kInvalidArgument) when disjoint).
+  Pipeline(PipelineOptions options, const CameraInfo& camera);
+  ~Pipeline();
+  Pipeline(Pipeline&&) noexcept;
+  Pipeline& operator=(Pipeline&&) noexcept;
+
+  /// Runs every stage on `frame` into `result` (see PipelineResult). Throws Error(kMismatch) when
+  /// the frame's size or modulation frequency differs from the camera's, and
+  /// Error(kInvalidArgument) for an inconsistent frame.
+  void Process(const Frame& frame, PipelineResult& result);
+  /// Same, into a fresh result.
+  [[nodiscard]] PipelineResult Process(const Frame& frame);
+
+  /// Register to set before the first frame: the controller's c_0 within the bounds.
+  [[nodiscard]] int InitialIntegrationRegister() const noexcept;
+  /// Forgets the controller's history (e.g. after the pan unit moved), continuing at `reg`.
+  void ResetController(int reg);
+
+  /// False colour of the distances with only the input flags black (no filters).
+  [[nodiscard]] Image<Rgb8> RenderRaw(const PipelineResult& result) const;
+  /// False colour after the filters (rejected pixels black).
+  [[nodiscard]] Image<Rgb8> RenderFiltered(const PipelineResult& result) const;
+
+  [[nodiscard]] const PipelineOptions& options() const noexcept { return options_; }
+  [[nodiscard]] const CameraInfo& camera() const noexcept { return camera_; }
+  [[nodiscard]] const RayTable& rays() const noexcept { return rays_; }
+  /// Name of the controller ("" when off).
+  [[nodiscard]] std::string_view ControllerName() const;
+
+ private:
+  [[nodiscard]] Image<Rgb8> Render(const PipelineResult& result,
+                                   const Image<PixelFlags>& flags) const;
+
+  PipelineOptions options_;
+  CameraInfo camera_;
+  RayTable rays_;
+  std::unique_ptr<IntegrationTimeController> controller_;
+};
+
+}  // namespace tofcam

@@ -1,0 +1,198 @@
+#include "tofcam/accuracy/delta_l.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+namespace {
+
+void CheckPositive(double value, double max, const char* name) {
+  if (!std::isfinite(value) || value <= 0.0 || value > max) {
+    throw Error(ErrorCode::kInvalidArgument, std::string("accuracy option ") + name + " = " +
+                                                 std::to_string(value) + " must be in (0, " +
+                                                 std::to_string(max) + "]");
+  }
+}
+
+void CheckMetricFrame(const MetricFrame& frame, const char* what) {
+  const int w = frame.width();
+  const int h = frame.height();
+  if (w <= 0 || h <= 0) {
+    throw Error(ErrorCode::kInvalidArgument, std::string(what) + ": empty frame");
+  }
+  if (!frame.amplitude.SameSize(w, h) ||
+      (frame.has_intensity() && !frame.intensity.SameSize(w, h))) {
+    throw Error(ErrorCode::kInvalidArgument,
+                std::string(what) + ": distance, amplitude and intensity differ in size");
+  }
+  const double f = frame.info.modulation_frequency_hz;
+  if (!std::isfinite(f) || f <= 0.0) {
+    throw Error(ErrorCode::kInvalidArgument,
+                std::string(what) + ": modulation frequency must be > 0 Hz");
+  }
+}
+
+}  // namespace
+
+void AccuracyOptions::Validate() const {
+  CheckPositive(scale, 1e6, "scale");
+  CheckPositive(intensity_per_amplitude, 1e6, "intensity_per_amplitude");
+}
+
+void DeltaLFitOptions::Validate() const {
+  if (!(max_delta_l_m > 0.0)) {  // also rejects NaN; +inf is allowed (no cut)
+    throw Error(ErrorCode::kInvalidArgument, "noise fit option max_delta_l_m = " +
+                                                 std::to_string(max_delta_l_m) + " must be > 0");
+  }
+  if (min_pixels < 1 || min_pixels > (1 << 28)) {
+    throw Error(
+        ErrorCode::kInvalidArgument,
+        "noise fit option min_pixels = " + std::to_string(min_pixels) + " must be in [1, 2^28]");
+  }
+  AccuracyOptions a = accuracy;
+  a.scale = 1.0;
+  a.Validate();
+}
+
+Image<float> ComputeDeltaL(const MetricFrame& frame, const AccuracyOptions& options) {
+  Image<float> out;
+  ComputeDeltaLInto(frame, options, out);
+  return out;
+}
+
+void ComputeDeltaLInto(const MetricFrame& frame, const AccuracyOptions& options,
+                       Image<float>& out) {
+  options.Validate();
+  CheckMetricFrame(frame, "ComputeDeltaL");
+  const int w = frame.width();
+  const int h = frame.height();
+  const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
+  if (!out.SameSize(w, h)) out = Image<float>(w, h);
+  // ΔL = k sqrt(I) / A with k = scale L / (2 sqrt(8)).
+  const double range_m = UnambiguousRangeM(frame.info.modulation_frequency_hz);
+  const float k = static_cast<float>(options.scale * range_m / (2.0 * std::sqrt(8.0)));
+  const float inf = std::numeric_limits<float>::infinity();
+  const float* a = frame.amplitude.data();
+  float* o = out.data();
+  if (frame.has_intensity()) {
+    const float* in = frame.intensity.data();
+    // Computed for every pixel and then selected, so the loop has no branch and vectorises.
+    for (std::size_t i = 0; i < n; ++i) {
+      const float ai = a[i];
+      const float q = k * std::sqrt(std::max(in[i], 0.0f)) / ai;
+      o[i] = ai > 0.0f ? q : inf;
+    }
+  } else {
+    // sqrt(k_I A) / A = sqrt(k_I) / sqrt(A).
+    const float ka = k * static_cast<float>(std::sqrt(options.intensity_per_amplitude));
+    for (std::size_t i = 0; i < n; ++i) {
+      const float ai = a[i];
+      const float q = ka / std::sqrt(std::max(ai, 0.0f));
+      o[i] = ai > 0.0f ? q : inf;
+    }
+  }
+}
+
+DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
+                              const DeltaLFitOptions& options) {
+  options.Validate();
+  if (frames.size() < 3) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "noise fit needs at least 3 static frames, got " + std::to_string(frames.size()));
+  }
+  const MetricFrame& first = frames.front();
+  CheckMetricFrame(first, "noise fit frame 0");
+  const int w = first.width();
+  const int h = first.height();
+  const double f_hz = first.info.modulation_frequency_hz;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const std::string what = "noise fit frame " + std::to_string(k);
+    CheckMetricFrame(frames[k], what.c_str());
+    if (frames[k].width() != w || frames[k].height() != h ||
+        (!frames[k].flags.empty() && !frames[k].flags.SameSize(w, h))) {
+      throw Error(ErrorCode::kInvalidArgument, what + ": size differs from frame 0");
+    }
+    if (frames[k].info.modulation_frequency_hz != f_hz) {
+      throw Error(ErrorCode::kInvalidArgument, what + ": modulation frequency differs");
+    }
+  }
+  AccuracyOptions accuracy = options.accuracy;
+  accuracy.scale = 1.0;
+  std::vector<Image<float>> delta_l;
+  delta_l.reserve(frames.size());
+  for (const MetricFrame& f : frames) delta_l.push_back(ComputeDeltaL(f, accuracy));
+
+  const double range_m = UnambiguousRangeM(f_hz);
+  const double to_rad = 2.0 * kPi / range_m;
+  const std::size_t n_pix = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
+  const double n_frames = static_cast<double>(frames.size());
+  std::vector<double> sigma, dl;
+  for (std::size_t i = 0; i < n_pix; ++i) {
+    bool ok = true;
+    double c = 0.0, s = 0.0, mean_dl = 0.0;
+    for (std::size_t k = 0; k < frames.size() && ok; ++k) {
+      const MetricFrame& f = frames[k];
+      const double d = f.radial_distance_m[i];
+      ok = (f.flags.empty() || f.flags[i].Valid()) && std::isfinite(d) &&
+           std::isfinite(delta_l[k][i]);
+      c += std::cos(d * to_rad);
+      s += std::sin(d * to_rad);
+      mean_dl += delta_l[k][i];
+    }
+    if (!ok) continue;
+    mean_dl /= n_frames;
+    if (!(mean_dl > 0.0) || mean_dl > options.max_delta_l_m) continue;
+    // Deviations from the circular mean, wrapped into [-L/2, L/2): no jump at the 0 / L seam.
+    const double centre_m = std::atan2(s, c) / to_rad;
+    double sum = 0.0, sum2 = 0.0;
+    for (const MetricFrame& f : frames) {
+      double dev = f.radial_distance_m[i] - centre_m;
+      dev -= range_m * std::floor(dev / range_m + 0.5);
+      sum += dev;
+      sum2 += dev * dev;
+    }
+    const double var = (sum2 - sum * sum / n_frames) / (n_frames - 1.0);
+    sigma.push_back(std::sqrt(std::max(var, 0.0)));
+    dl.push_back(mean_dl);
+  }
+  if (sigma.size() < static_cast<std::size_t>(options.min_pixels)) {
+    throw Error(ErrorCode::kInvalidArgument, "noise fit: only " + std::to_string(sigma.size()) +
+                                                 " usable pixels, need " +
+                                                 std::to_string(options.min_pixels));
+  }
+  DeltaLScaleFit fit;
+  fit.frames = static_cast<int>(frames.size());
+  fit.pixels_used = static_cast<int>(sigma.size());
+  double num = 0.0, den = 0.0;
+  for (std::size_t i = 0; i < sigma.size(); ++i) {
+    num += sigma[i] * sigma[i] * dl[i] * dl[i];
+    den += dl[i] * dl[i] * dl[i] * dl[i];
+  }
+  fit.scale = std::sqrt(num / den);
+  std::vector<double> ratio(sigma.size());
+  double ss_res = 0.0, ss_tot = 0.0, rel = 0.0, mean_sigma = 0.0;
+  for (double v : sigma) mean_sigma += v;
+  mean_sigma /= static_cast<double>(sigma.size());
+  for (std::size_t i = 0; i < sigma.size(); ++i) {
+    ratio[i] = sigma[i] / dl[i];
+    const double model = fit.scale * dl[i];
+    ss_res += (sigma[i] - model) * (sigma[i] - model);
+    ss_tot += (sigma[i] - mean_sigma) * (sigma[i] - mean_sigma);
+    rel += (sigma[i] - model) * (sigma[i] - model) / (model * model);
+  }
+  std::nth_element(ratio.begin(), ratio.begin() + static_cast<std::ptrdiff_t>(ratio.size() / 2),
+                   ratio.end());
+  fit.median_ratio = ratio[ratio.size() / 2];
+  fit.r_squared = ss_tot > 0.0 ? 1.0 - ss_res / ss_tot : 0.0;
+  fit.relative_rms = std::sqrt(rel / static_cast<double>(sigma.size()));
+  return fit;
+}
+
+}  // namespace tofcam

@@ -1,0 +1,281 @@
+#include "tofcam/color/false_color.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "../filters/hot_loop.h"
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+namespace {
+
+constexpr float kMaxF = std::numeric_limits<float>::max();
+
+std::uint8_t ToByte(float v) {  // v in [0, 1]; round half up
+  return static_cast<std::uint8_t>(static_cast<int>(v * 255.0f + 0.5f));
+}
+
+void CheckSize(const Image<float>& d, int w, int h, const char* what) {
+  if (!d.empty() && !d.SameSize(w, h)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                std::string("false colour: ") + what + " differs in size from the distance image");
+  }
+}
+
+// 3x5 glyphs, one row per entry, bit 2 = left column.
+struct Glyph {
+  char c;
+  std::array<std::uint8_t, 5> rows;
+};
+constexpr Glyph kFont[] = {
+    {'0', {7, 5, 5, 5, 7}}, {'1', {2, 6, 2, 2, 7}}, {'2', {7, 1, 7, 4, 7}}, {'3', {7, 1, 7, 1, 7}},
+    {'4', {5, 5, 7, 1, 1}}, {'5', {7, 4, 7, 1, 7}}, {'6', {7, 4, 7, 5, 7}}, {'7', {7, 1, 1, 2, 2}},
+    {'8', {7, 5, 7, 5, 7}}, {'9', {7, 5, 7, 1, 7}}, {'.', {0, 0, 0, 0, 2}}, {'-', {0, 0, 7, 0, 0}},
+    {'m', {0, 0, 7, 7, 5}},
+};
+
+const std::array<std::uint8_t, 5>* FindGlyph(char c) {
+  for (const Glyph& g : kFont) {
+    if (g.c == c) return &g.rows;
+  }
+  return nullptr;
+}
+
+void DrawText(Image<Rgb8>& img, int x0, int y0, const std::string& text, int scale, Rgb8 color) {
+  for (std::size_t k = 0; k < text.size(); ++k) {
+    const auto* g = FindGlyph(text[k]);
+    if (g == nullptr) continue;
+    for (int gy = 0; gy < 5; ++gy) {
+      for (int gx = 0; gx < 3; ++gx) {
+        if (((*g)[gy] >> (2 - gx) & 1) == 0) continue;
+        for (int sy = 0; sy < scale; ++sy) {
+          for (int sx = 0; sx < scale; ++sx) {
+            const int x = x0 + (static_cast<int>(k) * 4 + gx) * scale + sx;
+            const int y = y0 + gy * scale + sy;
+            if (x >= 0 && y >= 0 && x < img.width() && y < img.height()) img(y, x) = color;
+          }
+        }
+      }
+    }
+  }
+}
+
+struct ColorLaw {
+  float near, inv_range, v_min, inv_ref;
+  bool black_outside, shade;
+};
+
+// One row into planar r, g, b bytes (vectorisable: restrict pointers, selects and integer
+// masks, no branches); the caller interleaves them into Rgb8 and passes zero-filled rows for
+// missing flags / amplitude.
+TOFCAM_HOT_LOOP void ColorRow(int w, const ColorLaw& law, const float* __restrict d,
+                              const PixelFlags* __restrict f, const float* __restrict a,
+                              std::uint8_t* __restrict r, std::uint8_t* __restrict g,
+                              std::uint8_t* __restrict b) {
+  const float near = law.near, inv_range = law.inv_range, v_min = law.v_min;
+  const float inv_ref = law.inv_ref;
+  const unsigned outside_ok = law.black_outside ? 0u : 1u;
+  const float shade = law.shade ? 1.0f : 0.0f;
+  for (int i = 0; i < w; ++i) {
+    const float t_raw = (d[i] - near) * inv_range;
+    const unsigned in_range =
+        static_cast<unsigned>(t_raw >= 0.0f) & static_cast<unsigned>(t_raw <= 1.0f);
+    const unsigned visible = static_cast<unsigned>(std::abs(d[i]) <= kMaxF) &
+                             static_cast<unsigned>((f[i].bits() & kRejectMask) == 0) &
+                             (in_range | outside_ok);
+    const float t = std::min(std::max(t_raw, 0.0f), 1.0f);
+    const float ai = a[i] >= 0.0f ? a[i] : 0.0f;  // NaN -> 0
+    const float shading = v_min + (1.0f - v_min) * std::min(1.0f, std::sqrt(ai * inv_ref));
+    const float v = static_cast<float>(visible) * (1.0f + shade * (shading - 1.0f));
+    // Round half up; the operands are in [0, 255.5], so the int conversion is exact.
+    const float scale = 255.0f * v;
+    r[i] = static_cast<std::uint8_t>(
+        static_cast<int>(scale * std::min(std::max(3.0f - 3.0f * t, 0.0f), 1.0f) + 0.5f));
+    g[i] = static_cast<std::uint8_t>(
+        static_cast<int>(scale * std::min(std::max(1.0f - 3.0f * t, 0.0f), 1.0f) + 0.5f));
+    b[i] = static_cast<std::uint8_t>(
+        static_cast<int>(scale * std::min(std::max(3.0f * t - 1.0f, 0.0f), 1.0f) + 0.5f));
+  }
+}
+
+}  // namespace
+
+void FalseColorOptions::Validate() const {
+  if (!(near_m >= 0.0 && near_m < 1e6)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: near_m = " + std::to_string(near_m) + " must be in [0, 1e6) m");
+  }
+  if (!(far_m == 0.0 || (far_m > near_m && far_m <= 1e6))) {
+    throw Error(ErrorCode::kInvalidArgument, "false colour: far_m = " + std::to_string(far_m) +
+                                                 " must be 0 (= L) or in (near_m, 1e6] m");
+  }
+  if (!(shading_reference_amplitude > 0.0 && shading_reference_amplitude <= 1e9)) {
+    throw Error(ErrorCode::kInvalidArgument, "false colour: shading_reference_amplitude = " +
+                                                 std::to_string(shading_reference_amplitude) +
+                                                 " must be > 0");
+  }
+  if (!(shading_min_value >= 0.0 && shading_min_value <= 1.0)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: shading_min_value = " + std::to_string(shading_min_value) +
+                    " is outside [0, 1]");
+  }
+}
+
+Rgb8 FalseColorOfDistance(double distance_m, double near_m, double far_m) {
+  const float t =
+      std::clamp(static_cast<float>((distance_m - near_m) / (far_m - near_m)), 0.0f, 1.0f);
+  return {ToByte(std::clamp(3.0f - 3.0f * t, 0.0f, 1.0f)),
+          ToByte(std::clamp(1.0f - 3.0f * t, 0.0f, 1.0f)),
+          ToByte(std::clamp(3.0f * t - 1.0f, 0.0f, 1.0f))};
+}
+
+Image<Rgb8> FalseColorImage(const Image<float>& distance_m, const Image<PixelFlags>& flags,
+                            const Image<float>& amplitude, double far_default_m,
+                            const FalseColorOptions& o) {
+  o.Validate();
+  const int w = distance_m.width(), h = distance_m.height();
+  if (distance_m.empty()) {
+    throw Error(ErrorCode::kInvalidArgument, "false colour: empty distance image");
+  }
+  CheckSize(amplitude, w, h, "amplitude");
+  if (!flags.empty() && !flags.SameSize(w, h)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: flags differ in size from the distance image");
+  }
+  if (o.amplitude_shading && amplitude.empty()) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: amplitude shading needs an amplitude image");
+  }
+  const double far = o.far_m > 0.0 ? o.far_m : far_default_m;
+  if (!(std::isfinite(far) && far > o.near_m)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: far limit " + std::to_string(far) +
+                    " m must exceed near_m = " + std::to_string(o.near_m) + " m");
+  }
+  const ColorLaw law{static_cast<float>(o.near_m),
+                     static_cast<float>(1.0 / (far - o.near_m)),
+                     static_cast<float>(o.shading_min_value),
+                     static_cast<float>(1.0 / o.shading_reference_amplitude),
+                     o.out_of_range_black,
+                     o.amplitude_shading};
+  Image<Rgb8> out(w, h);
+  thread_local std::vector<std::uint8_t> planes;
+  thread_local std::vector<float> zero_amplitude;
+  thread_local std::vector<PixelFlags> zero_flags;
+  planes.resize(3 * static_cast<std::size_t>(w));
+  zero_amplitude.assign(static_cast<std::size_t>(w), 0.0f);
+  zero_flags.assign(static_cast<std::size_t>(w), PixelFlags());
+  std::uint8_t* r = planes.data();
+  std::uint8_t* g = r + w;
+  std::uint8_t* b = g + w;
+  for (int row = 0; row < h; ++row) {
+    ColorRow(w, law, distance_m.Row(row).data(),
+             flags.empty() ? zero_flags.data() : flags.Row(row).data(),
+             amplitude.empty() ? zero_amplitude.data() : amplitude.Row(row).data(), r, g, b);
+    Rgb8* px = out.Row(row).data();
+    for (int i = 0; i < w; ++i) px[i] = Rgb8{r[i], g[i], b[i]};
+  }
+  return out;
+}
+
+Image<Rgb8> FalseColor(const MetricFrame& frame, const FalseColorOptions& options) {
+  const double f = frame.info.modulation_frequency_hz;
+  if (!(std::isfinite(f) && f > 0.0)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: frame modulation frequency must be > 0");
+  }
+  return FalseColorImage(frame.radial_distance_m, frame.flags, frame.amplitude,
+                         UnambiguousRangeM(f), options);
+}
+
+void LegendOptions::Validate() const {
+  if (bar_height_px < 2 || bar_height_px > 256) {
+    throw Error(
+        ErrorCode::kInvalidArgument,
+        "legend: bar_height_px = " + std::to_string(bar_height_px) + " is outside [2, 256]");
+  }
+  if (font_scale < 1 || font_scale > 8) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "legend: font_scale = " + std::to_string(font_scale) + " is outside [1, 8]");
+  }
+}
+
+Image<Rgb8> AddLegend(const Image<Rgb8>& image, double near_m, double far_m,
+                      const LegendOptions& o) {
+  o.Validate();
+  if (image.width() < 16 || image.height() < 1) {
+    throw Error(
+        ErrorCode::kInvalidArgument,
+        "legend: image of width " + std::to_string(image.width()) + " is narrower than 16 px");
+  }
+  if (!(std::isfinite(near_m) && std::isfinite(far_m) && far_m > near_m)) {
+    throw Error(ErrorCode::kInvalidArgument, "legend: far_m = " + std::to_string(far_m) +
+                                                 " must exceed near_m = " + std::to_string(near_m));
+  }
+  const int w = image.width();
+  const int s = o.font_scale;
+  const int margin = 2 * s;
+  const int tick_len = 2 * s;
+  const int text_h = 5 * s;
+  const int bar_top = image.height() + margin;
+  const int tick_top = bar_top + o.bar_height_px;
+  const int text_top = tick_top + tick_len + s;
+  const int total_h = text_top + text_h + margin;
+  Image<Rgb8> out(w, total_h);
+  for (int r = 0; r < image.height(); ++r) {
+    std::copy(image.Row(r).begin(), image.Row(r).end(), out.Row(r).begin());
+  }
+  // The bar spans pixel centres left..right; pixel x shows distance near + (x-left)/(right-left).
+  const int left = margin, right = w - 1 - margin;
+  for (int x = left; x <= right; ++x) {
+    const Rgb8 c = FalseColorOfDistance(near_m + (far_m - near_m) * (x - left) / (right - left),
+                                        near_m, far_m);
+    for (int y = bar_top; y < tick_top; ++y) out(y, x) = c;
+  }
+
+  // Tick step: the smallest 1/2/5 × 10^k whose labels (plus a gap) fit between ticks.
+  const double px_per_m = (right - left) / (far_m - near_m);
+  double step = 0.0;
+  int decimals = 0;
+  for (int e = -3; e <= 6 && step == 0.0; ++e) {
+    for (double m : {1.0, 2.0, 5.0}) {
+      const double cand = m * std::pow(10.0, e);
+      const int dec = std::max(0, -e);
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.*f", dec, std::max(std::abs(near_m), std::abs(far_m)));
+      const double label_px = (4.0 * static_cast<double>(std::string(buf).size()) + 2.0) * s;
+      if (cand * px_per_m >= label_px) {
+        step = cand;
+        decimals = dec;
+        break;
+      }
+    }
+  }
+  if (step == 0.0) return out;  // cannot happen for w >= 16 and a finite range; keep the bar
+  const Rgb8 white{255, 255, 255};
+  for (double k = std::ceil(near_m / step - 1e-9); k * step <= far_m + 1e-9 * step; k += 1.0) {
+    const double value = k * step;
+    const int x = left + static_cast<int>(std::lround((value - near_m) * px_per_m));
+    for (int y = tick_top; y < tick_top + tick_len; ++y) {
+      for (int dx = 0; dx < s; ++dx) {
+        if (x + dx <= right) out(y, x + dx) = white;
+      }
+    }
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.*f", decimals, std::abs(value) < 0.5 * step ? 0.0 : value);
+    const std::string text(buf);
+    const int text_w = (4 * static_cast<int>(text.size()) - 1) * s;
+    const int x0 = std::clamp(x - text_w / 2, 0, std::max(0, w - text_w));
+    DrawText(out, x0, text_top, text, s, white);
+  }
+  return out;
+}
+
+}  // namespace tofcam

@@ -1,0 +1,279 @@
+#include "tofcam/control/integration_time_controller.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdio>
+#include <limits>
+#include <string>
+
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+[[noreturn]] void Bad(const std::string& field, const std::string& value, const std::string& rule) {
+  throw Error(ErrorCode::kInvalidArgument,
+              "controller option " + field + " = " + value + " " + rule);
+}
+
+std::string Num(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+// The ROI clipped to the frame, as [row0, row1) x [col0, col1).
+struct Rect {
+  int row0, row1, col0, col1;
+};
+
+Rect Clip(const RegionOfInterest& roi, int width, int height) {
+  const bool whole = roi.rows <= 0 || roi.cols <= 0;
+  Rect r{whole ? 0 : roi.row, whole ? height : roi.row + roi.rows, whole ? 0 : roi.col,
+         whole ? width : roi.col + roi.cols};
+  r.row0 = std::clamp(r.row0, 0, height);
+  r.row1 = std::clamp(r.row1, r.row0, height);
+  r.col0 = std::clamp(r.col0, 0, width);
+  r.col1 = std::clamp(r.col1, r.col0, width);
+  return r;
+}
+
+const Image<float>& ControlChannel(const MetricFrame& frame) {
+  return frame.has_intensity() ? frame.intensity : frame.amplitude;
+}
+
+bool Usable(const MetricFrame& frame, std::size_t i, std::uint16_t exclude) {
+  return frame.flags.empty() || !frame.flags[i].Any(exclude);
+}
+
+int RoundClamp(double c, int lo, int hi) {
+  if (!std::isfinite(c)) return c > 0 ? hi : lo;
+  return static_cast<int>(
+      std::lround(std::clamp(c, static_cast<double>(lo), static_cast<double>(hi))));
+}
+
+}  // namespace
+
+std::string_view ControllerKindName(ControllerKind kind) noexcept {
+  switch (kind) {
+    case ControllerKind::kMayProportional:
+      return "may-proportional";
+    case ControllerKind::kMayIncremental:
+      return "may-incremental";
+    case ControllerKind::kVendorHistogram:
+      return "vendor-histogram";
+    case ControllerKind::kFixed:
+      return "fixed";
+  }
+  return "unknown";
+}
+
+ControllerKind ParseControllerKind(std::string_view name) {
+  for (ControllerKind k : {ControllerKind::kMayProportional, ControllerKind::kMayIncremental,
+                           ControllerKind::kVendorHistogram, ControllerKind::kFixed}) {
+    if (ControllerKindName(k) == name) return k;
+  }
+  throw Error(ErrorCode::kInvalidArgument,
+              "unknown controller kind '" + std::string(name) +
+                  "' (known: may-proportional, may-incremental, vendor-histogram, fixed)");
+}
+
+void ControllerOptions::Validate() const {
+  if (!std::isfinite(target_intensity) || target_intensity <= 0.0 || target_intensity > 65532.0) {
+    Bad("target_intensity (I_A)", Num(target_intensity), "must be in (0, 65532]");
+  }
+  if (!std::isfinite(gain_register_per_intensity) || gain_register_per_intensity < 0.0 ||
+      gain_register_per_intensity > 1.0) {
+    Bad("gain_register_per_intensity (V_p)", Num(gain_register_per_intensity), "must be in [0, 1]");
+  }
+  if (min_register < 1 || min_register > max_register) {
+    Bad("min_register", std::to_string(min_register), "must be in [1, max_register]");
+  }
+  if (max_register > 65535) Bad("max_register", std::to_string(max_register), "must be <= 65535");
+  if (bias_register < min_register || bias_register > max_register) {
+    Bad("bias_register (c_0)", std::to_string(bias_register),
+        "must be in [min_register, max_register] = [" + std::to_string(min_register) + ", " +
+            std::to_string(max_register) + "]");
+  }
+  if (roi.row < 0 || roi.col < 0 || roi.rows < 0 || roi.cols < 0) {
+    Bad("roi",
+        std::to_string(roi.row) + "," + std::to_string(roi.col) + "," + std::to_string(roi.rows) +
+            "," + std::to_string(roi.cols),
+        "must not be negative");
+  }
+  if (!std::isfinite(percent_over_pos) || percent_over_pos < 0.0 || percent_over_pos >= 100.0) {
+    Bad("percent_over_pos", Num(percent_over_pos), "must be in [0, 100)");
+  }
+  if (desired_pos < 1 || desired_pos > 255) {
+    Bad("desired_pos", std::to_string(desired_pos), "must be in [1, 255]");
+  }
+  if (!std::isfinite(vendor_gain) || vendor_gain <= 0.0 || vendor_gain > 1.0) {
+    Bad("vendor_gain", Num(vendor_gain), "must be in (0, 1]");
+  }
+  if (vendor_max_step_register < 1) {
+    Bad("vendor_max_step_register", std::to_string(vendor_max_step_register), "must be >= 1");
+  }
+  if (vendor_deadband < 0 || vendor_deadband > 254) {
+    Bad("vendor_deadband", std::to_string(vendor_deadband), "must be in [0, 254]");
+  }
+}
+
+double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& roi,
+                            std::uint16_t exclude_flags) {
+  const Image<float>& channel = ControlChannel(frame);
+  const Rect r = Clip(roi, channel.width(), channel.height());
+  const bool flags_ok = frame.flags.empty() || frame.flags.SameSize(channel);
+  double sum = 0.0;
+  std::size_t count = 0;
+  for (int row = r.row0; row < r.row1; ++row) {
+    const std::size_t base = static_cast<std::size_t>(row) * channel.width();
+    for (int col = r.col0; col < r.col1; ++col) {
+      const std::size_t i = base + col;
+      if (flags_ok && !Usable(frame, i, exclude_flags)) continue;
+      const float v = channel[i];
+      if (!std::isfinite(v)) continue;
+      sum += v;
+      ++count;
+    }
+  }
+  return count == 0 ? std::numeric_limits<double>::quiet_NaN() : sum / static_cast<double>(count);
+}
+
+// --- MayProportional -------------------------------------------------------------------------
+
+MayProportional::MayProportional(const ControllerOptions& options)
+    : options_(options), last_register_(options.bias_register) {
+  options_.Validate();
+}
+
+int MayProportional::Update(const MetricFrame& frame) {
+  const double mean = MeanControlIntensity(frame, options_.roi, options_.exclude_flags);
+  if (std::isnan(mean)) return last_register_;
+  const double deviation = mean - options_.target_intensity;  // D_t
+  last_register_ =
+      RoundClamp(-options_.gain_register_per_intensity * deviation + options_.bias_register,
+                 options_.min_register, options_.max_register);
+  return last_register_;
+}
+
+std::string_view MayProportional::Name() const {
+  return ControllerKindName(ControllerKind::kMayProportional);
+}
+
+void MayProportional::Reset(int current_register) {
+  last_register_ = std::clamp(current_register, options_.min_register, options_.max_register);
+}
+
+// --- MayIncremental --------------------------------------------------------------------------
+
+MayIncremental::MayIncremental(const ControllerOptions& options)
+    : options_(options), state_(options.bias_register) {
+  options_.Validate();
+}
+
+int MayIncremental::Update(const MetricFrame& frame) {
+  const double mean = MeanControlIntensity(frame, options_.roi, options_.exclude_flags);
+  if (!std::isnan(mean)) {
+    state_ -= options_.gain_register_per_intensity * (mean - options_.target_intensity);
+    state_ = std::clamp(state_, static_cast<double>(options_.min_register),
+                        static_cast<double>(options_.max_register));
+  }
+  return RoundClamp(state_, options_.min_register, options_.max_register);
+}
+
+std::string_view MayIncremental::Name() const {
+  return ControllerKindName(ControllerKind::kMayIncremental);
+}
+
+void MayIncremental::Reset(int current_register) {
+  state_ = std::clamp(current_register, options_.min_register, options_.max_register);
+}
+
+// --- VendorHistogram -------------------------------------------------------------------------
+
+VendorHistogram::VendorHistogram(const ControllerOptions& options)
+    : options_(options), state_(options.bias_register) {
+  options_.Validate();
+}
+
+int VendorHistogram::Update(const MetricFrame& frame) {
+  const Image<float>& channel = ControlChannel(frame);
+  const Rect r = Clip(options_.roi, channel.width(), channel.height());
+  const bool flags_ok = frame.flags.empty() || frame.flags.SameSize(channel);
+  std::array<std::size_t, 256> histogram{};
+  std::size_t count = 0;
+  for (int row = r.row0; row < r.row1; ++row) {
+    const std::size_t base = static_cast<std::size_t>(row) * channel.width();
+    for (int col = r.col0; col < r.col1; ++col) {
+      const std::size_t i = base + col;
+      if (flags_ok && !Usable(frame, i, options_.exclude_flags)) continue;
+      const float v = channel[i];
+      if (!(v >= 0.0f)) continue;  // NaN and negatives carry no exposure information
+      const auto bin = static_cast<std::size_t>(std::min(v, 65535.0f)) >> 8;
+      ++histogram[bin];
+      ++count;
+    }
+  }
+  const int current = RoundClamp(state_, options_.min_register, options_.max_register);
+  if (count == 0) {
+    last_position_ = -1;
+    return current;
+  }
+  // x: smallest value with at most percent_over_pos % of the pixels strictly above it.
+  const double allowed_above = options_.percent_over_pos / 100.0 * static_cast<double>(count);
+  std::size_t above = count;
+  int x = 0;
+  for (; x < 256; ++x) {
+    above -= histogram[static_cast<std::size_t>(x)];
+    if (static_cast<double>(above) <= allowed_above) break;
+  }
+  last_position_ = x;
+  if (std::abs(x - options_.desired_pos) <= options_.vendor_deadband) return current;
+  const double ratio = static_cast<double>(options_.desired_pos) / std::max(x, 1);
+  double step = state_ * options_.vendor_gain * (ratio - 1.0);
+  step = std::clamp(step, -static_cast<double>(options_.vendor_max_step_register),
+                    static_cast<double>(options_.vendor_max_step_register));
+  state_ = std::clamp(state_ + step, static_cast<double>(options_.min_register),
+                      static_cast<double>(options_.max_register));
+  return RoundClamp(state_, options_.min_register, options_.max_register);
+}
+
+std::string_view VendorHistogram::Name() const {
+  return ControllerKindName(ControllerKind::kVendorHistogram);
+}
+
+void VendorHistogram::Reset(int current_register) {
+  state_ = std::clamp(current_register, options_.min_register, options_.max_register);
+  last_position_ = -1;
+}
+
+// --- Fixed -----------------------------------------------------------------------------------
+
+Fixed::Fixed(const ControllerOptions& options) : register_(options.bias_register) {
+  options.Validate();
+}
+
+int Fixed::Update(const MetricFrame& /*frame*/) { return register_; }
+
+std::string_view Fixed::Name() const { return ControllerKindName(ControllerKind::kFixed); }
+
+void Fixed::Reset(int /*current_register*/) {}
+
+std::unique_ptr<IntegrationTimeController> MakeController(const ControllerOptions& options) {
+  options.Validate();
+  switch (options.kind) {
+    case ControllerKind::kMayProportional:
+      return std::make_unique<MayProportional>(options);
+    case ControllerKind::kMayIncremental:
+      return std::make_unique<MayIncremental>(options);
+    case ControllerKind::kVendorHistogram:
+      return std::make_unique<VendorHistogram>(options);
+    case ControllerKind::kFixed:
+      return std::make_unique<Fixed>(options);
+  }
+  throw Error(ErrorCode::kInvalidArgument, "controller option kind is not a known kind");
+}
+
+}  // namespace tofcam

@@ -1,0 +1,53 @@
+#pragma once
+// Shared by the filter implementations: input checks and the "into" forms that ApplyFilters
+// chains without copying the frame (prior = what counts as already rejected, out = ORed into).
+
+#include "hot_loop.h"
+#include "tofcam/core/camera_intrinsics.h"
+#include "tofcam/core/frame.h"
+#include "tofcam/core/image.h"
+#include "tofcam/core/pixel_flags.h"
+#include "tofcam/filters/flying_pixel_filter.h"
+#include "tofcam/filters/jump_edge_filter.h"
+#include "tofcam/filters/pixel_filters.h"
+#include "tofcam/filters/weingarten_cell_filter.h"
+
+namespace tofcam::filters_internal {
+
+// kInvalidArgument unless the distance image is non-empty and every non-empty channel
+// (amplitude, intensity, flags, delta_l_m) has its size.
+void CheckFrame(const MetricFrame& frame, const char* filter);
+// kMismatch unless all three ray images have the frame's size.
+void CheckRays(const MetricFrame& frame, const RayTable& rays, const char* filter);
+
+// `prior`'s pixels, or a zero-filled buffer of `n` flags when `prior` is empty, so hot loops need
+// no null checks (valid until the next call on this thread).
+const PixelFlags* PriorOrZeros(const Image<PixelFlags>& prior, std::size_t n);
+
+// Per-pixel filters OR their bit into `out` (the frame's size).
+void AccuracyInto(const MetricFrame& frame, const AccuracyThresholdOptions& o,
+                  Image<PixelFlags>& out);
+void AmplitudeInto(const MetricFrame& frame, const AmplitudeThresholdOptions& o,
+                   Image<PixelFlags>& out);
+void SaturationInto(const MetricFrame& frame, const SaturationOptions& o, Image<PixelFlags>& out);
+void RangeInto(const MetricFrame& frame, const RangeOptions& o, Image<PixelFlags>& out);
+
+// The four per-pixel filters fused into one pass (one read of each channel, one write of the
+// flags); the disabled ones contribute nothing. Same results as calling them one by one.
+struct PixelFilterSet {
+  const RangeOptions* range = nullptr;  // nullptr = disabled
+  const AmplitudeThresholdOptions* amplitude = nullptr;
+  const SaturationOptions* saturation = nullptr;
+  const AccuracyThresholdOptions* accuracy = nullptr;
+};
+void PixelFiltersInto(const MetricFrame& frame, const PixelFilterSet& set, Image<PixelFlags>& out);
+
+// Neighbourhood filters: `prior` (empty = nothing rejected) says which pixels to ignore.
+void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
+                  const JumpEdgeOptions& o, Image<PixelFlags>& out);
+void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
+                     const FlyingPixelOptions& o, Image<PixelFlags>& out);
+void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
+                    const WeingartenCellOptions& o, Image<PixelFlags>& out);
+
+}  // namespace tofcam::filters_internal

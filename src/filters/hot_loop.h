@@ -1,0 +1,20 @@
+#pragma once
+// TOFCAM_HOT_LOOP: compile a hot loop twice, for AVX2 and for the baseline, and pick one at load
+// time (GCC / clang function multiversioning through an ELF ifunc), so one binary runs
+// everywhere and uses 8-wide vectors where the CPU has them. Off under AddressSanitizer and
+// outside x86-64 Linux. Shared by src/filters, src/cloud and src/color.
+
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define TOFCAM_NO_CLONES 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__)
+#define TOFCAM_NO_CLONES 1
+#endif
+
+#if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
+#define TOFCAM_HOT_LOOP __attribute__((target_clones("avx2", "default")))
+#else
+#define TOFCAM_HOT_LOOP
+#endif

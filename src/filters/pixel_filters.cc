@@ -1,0 +1,295 @@
+#include "tofcam/filters/pixel_filters.h"
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "filter_internal.h"
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace filters_internal {
+namespace {
+
+constexpr std::uint16_t Bit(Flag f) { return static_cast<std::uint16_t>(f); }
+
+void CheckChannel(int w, int h, int cw, int ch, bool allow_empty, const char* filter,
+                  const char* channel) {
+  if (allow_empty && cw == 0 && ch == 0) return;
+  if (cw != w || ch != h) {
+    throw Error(ErrorCode::kInvalidArgument, std::string(filter) + ": " + channel + " is " +
+                                                 std::to_string(cw) + "x" + std::to_string(ch) +
+                                                 ", the distance image " + std::to_string(w) + "x" +
+                                                 std::to_string(h));
+  }
+}
+
+}  // namespace
+
+void CheckFrame(const MetricFrame& f, const char* filter) {
+  const int w = f.radial_distance_m.width(), h = f.radial_distance_m.height();
+  if (f.radial_distance_m.empty()) {
+    throw Error(ErrorCode::kInvalidArgument, std::string(filter) + ": empty distance image");
+  }
+  CheckChannel(w, h, f.amplitude.width(), f.amplitude.height(), true, filter, "amplitude");
+  CheckChannel(w, h, f.intensity.width(), f.intensity.height(), true, filter, "intensity");
+  CheckChannel(w, h, f.flags.width(), f.flags.height(), true, filter, "flags");
+  CheckChannel(w, h, f.delta_l_m.width(), f.delta_l_m.height(), true, filter, "delta_l_m");
+}
+
+void CheckRays(const MetricFrame& f, const RayTable& rays, const char* filter) {
+  const int w = f.width(), h = f.height();
+  if (!rays.x.SameSize(w, h) || !rays.y.SameSize(w, h) || !rays.z.SameSize(w, h)) {
+    throw Error(ErrorCode::kMismatch, std::string(filter) + ": ray table is " +
+                                          std::to_string(rays.x.width()) + "x" +
+                                          std::to_string(rays.x.height()) + ", the frame " +
+                                          std::to_string(w) + "x" + std::to_string(h));
+  }
+}
+
+const PixelFlags* PriorOrZeros(const Image<PixelFlags>& prior, std::size_t n) {
+  if (!prior.empty()) return prior.data();
+  thread_local std::vector<PixelFlags> zeros;
+  if (zeros.size() < n) zeros.resize(n);
+  return zeros.data();
+}
+
+// The loops below write whole PixelFlags values computed without branches so that they
+// vectorise; `!(x <= t)` is true for NaN as well as for x > t.
+
+void AccuracyInto(const MetricFrame& frame, const AccuracyThresholdOptions& o,
+                  Image<PixelFlags>& out) {
+  if (frame.delta_l_m.empty()) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "accuracy threshold filter: delta_l_m is empty (run the accuracy stage first)");
+  }
+  const float t = static_cast<float>(o.max_delta_l_m);
+  const float* dl = frame.delta_l_m.data();
+  PixelFlags* f = out.data();
+  const std::size_t n = out.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool ok = (dl[i] >= 0.0f) & (dl[i] <= t);
+    f[i] |= PixelFlags(static_cast<std::uint16_t>(ok ? 0 : Bit(Flag::kHighDeltaL)));
+  }
+}
+
+void AmplitudeInto(const MetricFrame& frame, const AmplitudeThresholdOptions& o,
+                   Image<PixelFlags>& out) {
+  if (frame.amplitude.empty()) {
+    throw Error(ErrorCode::kInvalidArgument, "amplitude threshold filter: amplitude is empty");
+  }
+  const float t = static_cast<float>(o.min_amplitude);
+  const float* a = frame.amplitude.data();
+  PixelFlags* f = out.data();
+  const std::size_t n = out.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    f[i] |= PixelFlags(static_cast<std::uint16_t>(a[i] >= t ? 0 : Bit(Flag::kLowAmplitude)));
+  }
+}
+
+void SaturationInto(const MetricFrame& frame, const SaturationOptions& o, Image<PixelFlags>& out) {
+  if (frame.amplitude.empty()) {
+    throw Error(ErrorCode::kInvalidArgument, "saturation filter: amplitude is empty");
+  }
+  const float max_a = static_cast<float>(o.max_amplitude);
+  const float* a = frame.amplitude.data();
+  PixelFlags* f = out.data();
+  const std::size_t n = out.size();
+  if (frame.intensity.empty()) {
+    for (std::size_t i = 0; i < n; ++i) {
+      f[i] |= PixelFlags(static_cast<std::uint16_t>(a[i] >= max_a ? Bit(Flag::kSaturated) : 0));
+    }
+    return;
+  }
+  const float max_i = static_cast<float>(o.max_intensity);
+  const float max_p = static_cast<float>(o.max_peak);
+  const float* in = frame.intensity.data();
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool sat = (in[i] >= max_i) | (a[i] >= max_a) | (in[i] + a[i] >= max_p);
+    f[i] |= PixelFlags(static_cast<std::uint16_t>(sat ? Bit(Flag::kSaturated) : 0));
+  }
+}
+
+void RangeInto(const MetricFrame& frame, const RangeOptions& o, Image<PixelFlags>& out) {
+  const float lo = static_cast<float>(o.min_distance_m);
+  const float hi = static_cast<float>(o.max_distance_m);
+  const float* d = frame.radial_distance_m.data();
+  PixelFlags* f = out.data();
+  const std::size_t n = out.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool ok = (d[i] >= lo) & (d[i] <= hi);
+    f[i] |= PixelFlags(static_cast<std::uint16_t>(ok ? 0 : Bit(Flag::kOutOfRange)));
+  }
+}
+
+namespace {
+
+struct FusedLimits {
+  float range_lo, range_hi, min_amplitude, max_intensity, max_amplitude, max_peak, max_delta_l;
+  std::uint16_t range_bit, amplitude_bit, saturation_bit, accuracy_bit;
+};
+
+TOFCAM_HOT_LOOP void FusedLoop(std::size_t n, const FusedLimits& l, const float* __restrict d,
+                               const float* __restrict a, const float* __restrict in,
+                               const float* __restrict dl, PixelFlags* __restrict f) {
+  const float lo = l.range_lo, hi = l.range_hi, min_a = l.min_amplitude;
+  const float max_i = l.max_intensity, max_a = l.max_amplitude, max_p = l.max_peak;
+  const float max_dl = l.max_delta_l;
+  const unsigned rb = l.range_bit, ab = l.amplitude_bit, sb = l.saturation_bit, db = l.accuracy_bit;
+  for (std::size_t i = 0; i < n; ++i) {
+    const unsigned range_bad = static_cast<unsigned>(!((d[i] >= lo) & (d[i] <= hi)));
+    const unsigned amp_bad = static_cast<unsigned>(!(a[i] >= min_a));
+    const unsigned sat =
+        static_cast<unsigned>((in[i] >= max_i) | (a[i] >= max_a) | (in[i] + a[i] >= max_p));
+    const unsigned dl_bad = static_cast<unsigned>(!((dl[i] >= 0.0f) & (dl[i] <= max_dl)));
+    const unsigned bits = (range_bad * rb) | (amp_bad * ab) | (sat * sb) | (dl_bad * db);
+    f[i] |= PixelFlags(static_cast<std::uint16_t>(bits));
+  }
+}
+
+const float* ZeroFloats(std::size_t n) {
+  thread_local std::vector<float> zeros;
+  if (zeros.size() < n) zeros.resize(n, 0.0f);
+  return zeros.data();
+}
+
+}  // namespace
+
+void PixelFiltersInto(const MetricFrame& frame, const PixelFilterSet& set, Image<PixelFlags>& out) {
+  if (set.range == nullptr && set.amplitude == nullptr && set.saturation == nullptr &&
+      set.accuracy == nullptr) {
+    return;
+  }
+  if ((set.amplitude != nullptr || set.saturation != nullptr) && frame.amplitude.empty()) {
+    throw Error(ErrorCode::kInvalidArgument, "filters: amplitude is empty");
+  }
+  if (set.accuracy != nullptr && frame.delta_l_m.empty()) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "accuracy threshold filter: delta_l_m is empty (run the accuracy stage first)");
+  }
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  const std::size_t n = out.size();
+  FusedLimits l{};
+  // A disabled filter gets limits nothing can fail (NaN-safe: its bit is 0 anyway).
+  l.range_lo = set.range ? static_cast<float>(set.range->min_distance_m) : -kInf;
+  l.range_hi = set.range ? static_cast<float>(set.range->max_distance_m) : kInf;
+  l.range_bit = set.range ? Bit(Flag::kOutOfRange) : 0;
+  l.min_amplitude = set.amplitude ? static_cast<float>(set.amplitude->min_amplitude) : 0.0f;
+  l.amplitude_bit = set.amplitude ? Bit(Flag::kLowAmplitude) : 0;
+  const bool has_i = !frame.intensity.empty();
+  l.max_intensity =
+      set.saturation && has_i ? static_cast<float>(set.saturation->max_intensity) : kInf;
+  l.max_amplitude = set.saturation ? static_cast<float>(set.saturation->max_amplitude) : kInf;
+  l.max_peak = set.saturation && has_i ? static_cast<float>(set.saturation->max_peak) : kInf;
+  l.saturation_bit = set.saturation ? Bit(Flag::kSaturated) : 0;
+  l.max_delta_l = set.accuracy ? static_cast<float>(set.accuracy->max_delta_l_m) : kInf;
+  l.accuracy_bit = set.accuracy ? Bit(Flag::kHighDeltaL) : 0;
+  FusedLoop(n, l, frame.radial_distance_m.data(),
+            frame.amplitude.empty() ? ZeroFloats(n) : frame.amplitude.data(),
+            has_i ? frame.intensity.data() : ZeroFloats(n),
+            frame.delta_l_m.empty() ? ZeroFloats(n) : frame.delta_l_m.data(), out.data());
+}
+
+}  // namespace filters_internal
+
+namespace {
+
+void RequireRange(double v, double lo, double hi, const char* name) {
+  if (!(v >= lo && v <= hi)) {
+    throw Error(ErrorCode::kInvalidArgument, std::string(name) + " = " + std::to_string(v) +
+                                                 " is outside [" + std::to_string(lo) + ", " +
+                                                 std::to_string(hi) + "]");
+  }
+}
+
+Image<PixelFlags> Blank(const MetricFrame& frame) {
+  return Image<PixelFlags>(frame.width(), frame.height());
+}
+
+}  // namespace
+
+void MergeFlags(MetricFrame& frame, const Image<PixelFlags>& flags) {
+  if (!flags.SameSize(frame.radial_distance_m)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "MergeFlags: flags are " + std::to_string(flags.width()) + "x" +
+                    std::to_string(flags.height()) + ", the frame " +
+                    std::to_string(frame.width()) + "x" + std::to_string(frame.height()));
+  }
+  if (frame.flags.empty()) {
+    frame.flags = flags;
+    return;
+  }
+  if (!frame.flags.SameSize(flags)) {
+    throw Error(ErrorCode::kInvalidArgument, "MergeFlags: frame.flags differ in size from frame");
+  }
+  PixelFlags* dst = frame.flags.data();
+  const PixelFlags* src = flags.data();
+  for (std::size_t i = 0; i < flags.size(); ++i) dst[i] |= src[i];
+}
+
+void AccuracyThresholdOptions::Validate() const {
+  // A zero or negative threshold would reject every pixel; 100 m is far beyond any range.
+  if (!(max_delta_l_m > 0.0 && max_delta_l_m <= 100.0)) {
+    throw Error(
+        ErrorCode::kInvalidArgument,
+        "accuracy.max_delta_l_m = " + std::to_string(max_delta_l_m) + " is outside (0, 100] m");
+  }
+}
+
+void AmplitudeThresholdOptions::Validate() const {
+  RequireRange(min_amplitude, 0.0, 65532.0, "amplitude.min_amplitude");
+}
+
+void SaturationOptions::Validate() const {
+  RequireRange(max_intensity, 1e-9, 1e9, "saturation.max_intensity");
+  RequireRange(max_amplitude, 1e-9, 1e9, "saturation.max_amplitude");
+  RequireRange(max_peak, 1e-9, 2e9, "saturation.max_peak");
+}
+
+void RangeOptions::Validate() const {
+  RequireRange(min_distance_m, 0.0, 1e6, "range.min_distance_m");
+  RequireRange(max_distance_m, 0.0, 1e6, "range.max_distance_m");
+  if (!(max_distance_m > min_distance_m)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "range.max_distance_m = " + std::to_string(max_distance_m) +
+                    " must exceed range.min_distance_m = " + std::to_string(min_distance_m));
+  }
+}
+
+Image<PixelFlags> AccuracyThresholdFilter(const MetricFrame& frame,
+                                          const AccuracyThresholdOptions& options) {
+  options.Validate();
+  filters_internal::CheckFrame(frame, "accuracy threshold filter");
+  Image<PixelFlags> out = Blank(frame);
+  filters_internal::AccuracyInto(frame, options, out);
+  return out;
+}
+
+Image<PixelFlags> AmplitudeThresholdFilter(const MetricFrame& frame,
+                                           const AmplitudeThresholdOptions& options) {
+  options.Validate();
+  filters_internal::CheckFrame(frame, "amplitude threshold filter");
+  Image<PixelFlags> out = Blank(frame);
+  filters_internal::AmplitudeInto(frame, options, out);
+  return out;
+}
+
+Image<PixelFlags> SaturationFilter(const MetricFrame& frame, const SaturationOptions& options) {
+  options.Validate();
+  filters_internal::CheckFrame(frame, "saturation filter");
+  Image<PixelFlags> out = Blank(frame);
+  filters_internal::SaturationInto(frame, options, out);
+  return out;
+}
+
+Image<PixelFlags> RangeFilter(const MetricFrame& frame, const RangeOptions& options) {
+  options.Validate();
+  filters_internal::CheckFrame(frame, "range filter");
+  Image<PixelFlags> out = Blank(frame);
+  filters_internal::RangeInto(frame, options, out);
+  return out;
+}
+
+}  // namespace tofcam

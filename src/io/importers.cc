@@ -1,0 +1,527 @@
+#include "tofcam/io/importers.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <system_error>
+
+#include "import_util.h"
+#include "tofcam/core/atomic_file.h"
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+
+using io_internal::BlankFrame;
+using io_internal::CheckImageSize;
+using io_internal::FrequencyForRange;
+using io_internal::ImportedCameraInfo;
+using io_internal::SetAmplitude;
+using io_internal::SetDistanceMm;
+
+namespace {
+
+[[noreturn]] void FormatError(const std::string& name, const std::string& what) {
+  throw Error(ErrorCode::kFormat, name + ": " + what);
+}
+
+std::uint16_t U16Le(const std::string_view bytes, std::size_t offset) {
+  return static_cast<std::uint16_t>(static_cast<unsigned char>(bytes[offset]) |
+                                    (static_cast<unsigned char>(bytes[offset + 1]) << 8));
+}
+
+// ADTF3175 in 512 x 512 (binned) mode: 75 deg x 75 deg field of view (data sheet); no calibration
+// ships with the sample files, so the principal point is the image centre.
+CameraIntrinsics AdiNominalIntrinsics(int width, int height) {
+  CameraIntrinsics k;
+  k.width = width;
+  k.height = height;
+  const double half_fov = 37.5 * kPi / 180.0;
+  k.fx_px = 0.5 * width / std::tan(half_fov);
+  k.fy_px = 0.5 * height / std::tan(half_fov);
+  k.cx_px = 0.5 * (width - 1);
+  k.cy_px = 0.5 * (height - 1);
+  return k;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// ADI ADTF3175
+
+ImportedSequence ParseAdiInterleaved(std::string_view bytes, int width, int height,
+                                     const std::string& name) {
+  CheckImageSize(width, height, name);
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  if (bytes.size() != n * 5) {
+    FormatError(name, std::to_string(bytes.size()) + " bytes, expected " + std::to_string(n * 5) +
+                          " (" + std::to_string(width) + " x " + std::to_string(height) +
+                          " x 5 interleaved)");
+  }
+  ImportedSequence seq;
+  const double f = FrequencyForRange(kImportRangeAdiM);
+  seq.camera = ImportedCameraInfo("ADI ADTF3175", AdiNominalIntrinsics(width, height), f);
+  Frame frame = BlankFrame(width, height, seq.camera.model, f);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t o = i * 5;
+    SetDistanceMm(frame, i, U16Le(bytes, o), kImportRangeAdiM);
+    // Byte o + 2 is the camera's confidence (0 = best). The camera already zeroes the depth of
+    // pixels it distrusts (depth 0 -> kInvalid above), so it is not mapped further.
+    SetAmplitude(frame, i, U16Le(bytes, o + 3));
+  }
+  seq.frames.push_back(std::move(frame));
+  return seq;
+}
+
+ImportedSequence ImportAdiInterleaved(const std::filesystem::path& bin_file, int width,
+                                      int height) {
+  CheckImageSize(width, height, bin_file.string());
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  const std::string bytes = io_internal::ReadExactly(
+      bin_file, n * 5,
+      "ADI interleaved " + std::to_string(width) + " x " + std::to_string(height) + " x 5");
+  return ParseAdiInterleaved(bytes, width, height, bin_file.string());
+}
+
+ImportedSequence ImportAdiRaw(const std::filesystem::path& depth_file,
+                              const std::filesystem::path& ir_file, int width, int height) {
+  CheckImageSize(width, height, depth_file.string());
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  const std::string what = "uint16 " + std::to_string(width) + " x " + std::to_string(height);
+  const std::string depth = io_internal::ReadExactly(depth_file, n * 2, what);
+  const std::string ir = io_internal::ReadExactly(ir_file, n * 2, what);
+  ImportedSequence seq;
+  const double f = FrequencyForRange(kImportRangeAdiM);
+  seq.camera = ImportedCameraInfo("ADI ADTF3175", AdiNominalIntrinsics(width, height), f);
+  Frame frame = BlankFrame(width, height, seq.camera.model, f);
+  for (std::size_t i = 0; i < n; ++i) {
+    SetDistanceMm(frame, i, U16Le(depth, 2 * i), kImportRangeAdiM);
+    SetAmplitude(frame, i, U16Le(ir, 2 * i));
+  }
+  seq.frames.push_back(std::move(frame));
+  return seq;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Azure Kinect
+
+CameraIntrinsics ParseAzureKinectCalibration(std::string_view json, int width, int height,
+                                             const std::string& name) {
+  CheckImageSize(width, height, name);
+  // Depth modes of the Azure Kinect SDK: calibration resolution and crop of each output size.
+  struct Mode {
+    int width, height, calibration_resolution, crop_x, crop_y;
+  };
+  static constexpr Mode kModes[] = {{640, 576, 1024, 192, 180},
+                                    {320, 288, 512, 96, 90},
+                                    {512, 512, 512, 0, 0},
+                                    {1024, 1024, 1024, 0, 0}};
+  const Mode* mode = nullptr;
+  for (const Mode& m : kModes) {
+    if (m.width == width && m.height == height) mode = &m;
+  }
+  if (mode == nullptr) {
+    throw Error(ErrorCode::kUnsupported, name + ": no Azure Kinect depth mode has " +
+                                             std::to_string(width) + " x " +
+                                             std::to_string(height) + " pixels");
+  }
+  nlohmann::json doc;
+  try {
+    doc = nlohmann::json::parse(json.begin(), json.end());
+  } catch (const nlohmann::json::exception& e) {
+    FormatError(name, std::string("invalid JSON: ") + e.what());
+  }
+  try {
+    const auto& cameras = doc.at("CalibrationInformation").at("Cameras");
+    if (!cameras.is_array()) FormatError(name, "'Cameras' is not an array");
+    for (const auto& cam : cameras) {
+      if (!cam.is_object() || cam.value("Purpose", "") != "CALIBRATION_CameraPurposeDepth") {
+        continue;
+      }
+      const auto& intr = cam.at("Intrinsics");
+      const std::string model = intr.at("ModelType").get<std::string>();
+      if (model.find("BrownConrady") == std::string::npos) {
+        throw Error(ErrorCode::kUnsupported,
+                    name + ": lens model '" + model + "' (only Brown-Conrady is supported)");
+      }
+      const auto& p = intr.at("ModelParameters");
+      if (!p.is_array() || p.size() < 14) {
+        FormatError(name, "depth camera ModelParameters must have 14 numbers");
+      }
+      double v[14];
+      for (int i = 0; i < 14; ++i) {
+        if (!p[i].is_number()) FormatError(name, "ModelParameters[" + std::to_string(i) + "]");
+        v[i] = p[i].get<double>();
+        if (!std::isfinite(v[i])) FormatError(name, "ModelParameters has a non-finite value");
+      }
+      const int sw = cam.at("SensorWidth").get<int>();
+      const int sh = cam.at("SensorHeight").get<int>();
+      if (sw != 1024 || sh != 1024) {
+        FormatError(name, "depth sensor is " + std::to_string(sw) + " x " + std::to_string(sh) +
+                              ", expected 1024 x 1024");
+      }
+      if (v[10] != 0.0 || v[11] != 0.0) {
+        throw Error(ErrorCode::kUnsupported,
+                    name + ": a distortion centre (codx, cody) other than 0 is not supported");
+      }
+      // Parameters are normalised by the calibration resolution; the SDK converts them to the
+      // mode's pixels by scaling, subtracting the crop, and shifting by half a pixel because its
+      // normalised coordinates put pixel corners (not centres) at integers.
+      const double r = mode->calibration_resolution;
+      CameraIntrinsics k;
+      k.width = width;
+      k.height = height;
+      k.cx_px = v[0] * r - mode->crop_x - 0.5;
+      k.cy_px = v[1] * r - mode->crop_y - 0.5;
+      k.fx_px = v[2] * r;
+      k.fy_px = v[3] * r;
+      k.k1 = v[4], k.k2 = v[5], k.k3 = v[6], k.k4 = v[7], k.k5 = v[8], k.k6 = v[9];
+      k.p2 = v[12];
+      k.p1 = v[13];
+      try {
+        k.Validate();
+      } catch (const Error& e) {
+        FormatError(name, std::string("depth intrinsics invalid: ") + e.what());
+      }
+      return k;
+    }
+  } catch (const nlohmann::json::exception& e) {
+    FormatError(name, std::string("unexpected calibration layout: ") + e.what());
+  }
+  FormatError(name, "no camera with Purpose CALIBRATION_CameraPurposeDepth");
+}
+
+ImportedSequence ImportAzureKinect(const std::filesystem::path& depth_file,
+                                   const std::filesystem::path& ir_file,
+                                   const std::filesystem::path& calibration_json, int width,
+                                   int height) {
+  CheckImageSize(width, height, depth_file.string());
+  const std::string json = ReadFile(calibration_json, std::size_t{1} << 20);
+  const CameraIntrinsics k =
+      ParseAzureKinectCalibration(json, width, height, calibration_json.string());
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  const std::string what = "uint16 " + std::to_string(width) + " x " + std::to_string(height);
+  const std::string depth = io_internal::ReadExactly(depth_file, n * 2, what);
+  const std::string ir = io_internal::ReadExactly(ir_file, n * 2, what);
+  ImportedSequence seq;
+  const double f = FrequencyForRange(kImportRangeAzureKinectM);
+  seq.camera = ImportedCameraInfo("Azure Kinect", k, f);
+  Frame frame = BlankFrame(width, height, seq.camera.model, f);
+  const RayTable rays = MakeRayTable(k);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double z_mm = U16Le(depth, 2 * i);
+    // Azure Kinect depth is z along the optical axis; tofcam registers hold radial distance.
+    const double ray_z = rays.z[i];
+    SetDistanceMm(frame, i, ray_z > 0 ? z_mm / ray_z : 0.0, kImportRangeAzureKinectM);
+    const std::uint16_t ir_value = U16Le(ir, 2 * i);
+    SetAmplitude(frame, i, ir_value);  // 65535 (sensor saturation) > 65532 -> kSaturated
+  }
+  seq.frames.push_back(std::move(frame));
+  return seq;
+}
+
+// ---------------------------------------------------------------------------------------------
+// MESA SwissRanger .dat
+
+namespace {
+
+struct Line {
+  std::string_view text;
+  std::size_t number;  // 1-based
+};
+
+std::vector<Line> SplitLines(std::string_view text) {
+  std::vector<Line> lines;
+  std::size_t pos = 0, number = 0;
+  while (pos < text.size()) {
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string_view::npos) end = text.size();
+    std::string_view line = text.substr(pos, end - pos);
+    ++number;
+    // Trim spaces and '\r'.
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) {
+      line.remove_suffix(1);
+    }
+    while (!line.empty() && (line.front() == ' ' || line.front() == '\t')) line.remove_prefix(1);
+    if (!line.empty()) lines.push_back({line, number});
+    pos = end + 1;
+  }
+  return lines;
+}
+
+// Parses whitespace-separated numbers; false on a token that is not a number.
+bool ParseNumbers(std::string_view line, std::vector<double>& out) {
+  out.clear();
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() &&
+           (line[i] == ' ' || line[i] == '\t' || line[i] == ',' || line[i] == ';')) {
+      ++i;
+    }
+    if (i >= line.size()) break;
+    std::size_t j = i;
+    while (j < line.size() && line[j] != ' ' && line[j] != '\t' && line[j] != ',' &&
+           line[j] != ';') {
+      ++j;
+    }
+    std::string_view token = line.substr(i, j - i);
+    if (!token.empty() && token.front() == '+') token.remove_prefix(1);
+    double v = 0;
+    const auto [ptr, ec] = std::from_chars(token.data(), token.data() + token.size(), v);
+    if (ec != std::errc() || ptr != token.data() + token.size()) return false;
+    out.push_back(v);
+    i = j;
+  }
+  return true;
+}
+
+// SR-4000: 176 x 144 px, 40 µm pitch, 10 mm lens (MESA data sheet).
+CameraIntrinsics MesaNominalIntrinsics(int width, int height) {
+  CameraIntrinsics k;
+  k.width = width;
+  k.height = height;
+  k.fx_px = k.fy_px = 250.0;
+  k.cx_px = 0.5 * (width - 1);
+  k.cy_px = 0.5 * (height - 1);
+  return k;
+}
+
+}  // namespace
+
+ImportedSequence ParseMesaDat(std::string_view text, const std::string& name) {
+  constexpr int kMaxSide = 4096;
+  constexpr std::size_t kMaxFrames = 100000;
+  const std::vector<Line> lines = SplitLines(text);
+  std::size_t li = 0;
+  int width = 0, height = 0;
+  std::vector<double> numbers;
+  struct RawFrame {
+    std::vector<double> channel[5];
+    double timestamp_ms = 0;
+  };
+  std::vector<RawFrame> raw;
+  auto where = [&](std::size_t index) {
+    return name + " line " +
+           std::to_string(index < lines.size() ? lines[index].number
+                                               : (lines.empty() ? 0 : lines.back().number));
+  };
+  while (li < lines.size()) {
+    if (raw.size() >= kMaxFrames) FormatError(name, "more than 100000 frames");
+    RawFrame frame;
+    for (int s = 0; s < 5; ++s) {
+      if (li >= lines.size() || lines[li].text.front() != '%') {
+        throw Error(ErrorCode::kFormat, where(li) + ": expected a '%' section header (section " +
+                                            std::to_string(s + 1) + " of 5)");
+      }
+      ++li;
+      std::vector<double>& values = frame.channel[s];
+      int rows = 0;
+      // The first section of the first frame defines the size: rows up to the next '%' line.
+      while (li < lines.size() && lines[li].text.front() != '%' && (height == 0 || rows < height)) {
+        if (!ParseNumbers(lines[li].text, numbers)) {
+          throw Error(ErrorCode::kFormat, where(li) + ": not a list of numbers");
+        }
+        if (width == 0) {
+          if (numbers.empty() || numbers.size() > kMaxSide) {
+            throw Error(ErrorCode::kFormat,
+                        where(li) + ": row of " + std::to_string(numbers.size()) + " values");
+          }
+          width = static_cast<int>(numbers.size());
+        }
+        if (static_cast<int>(numbers.size()) != width) {
+          throw Error(ErrorCode::kFormat, where(li) + ": row has " +
+                                              std::to_string(numbers.size()) +
+                                              " values, expected " + std::to_string(width));
+        }
+        values.insert(values.end(), numbers.begin(), numbers.end());
+        ++rows;
+        ++li;
+        if (height == 0 && rows > kMaxSide) {
+          throw Error(ErrorCode::kFormat, where(li) + ": more than 4096 rows in a section");
+        }
+      }
+      if (height == 0) {
+        if (rows == 0) throw Error(ErrorCode::kFormat, where(li) + ": empty section");
+        height = rows;
+      }
+      if (rows != height) {
+        throw Error(ErrorCode::kFormat, where(li) + ": section has " + std::to_string(rows) +
+                                            " rows, expected " + std::to_string(height));
+      }
+    }
+    // The timestamp line: the last number on it, or on the next line when it is a bare header.
+    if (li >= lines.size()) {
+      throw Error(ErrorCode::kFormat,
+                  where(li) + ": missing timestamp line after frame " + std::to_string(raw.size()));
+    }
+    std::string_view ts = lines[li].text;
+    bool header_only = false;
+    if (ts.front() == '%') {
+      ts.remove_prefix(1);
+      // Keep only the part after the last ':' or '=' (e.g. "% timestamp [ms]: 1234").
+      const std::size_t sep = ts.find_last_of(":=");
+      if (sep != std::string_view::npos) ts.remove_prefix(sep + 1);
+      header_only = !ParseNumbers(ts, numbers) || numbers.empty();
+    }
+    if (header_only) {
+      ++li;
+      if (li >= lines.size()) throw Error(ErrorCode::kFormat, where(li) + ": missing timestamp");
+      ts = lines[li].text;
+    }
+    if (!ParseNumbers(ts, numbers) || numbers.empty() || !std::isfinite(numbers.back())) {
+      throw Error(ErrorCode::kFormat, where(li) + ": expected a timestamp");
+    }
+    frame.timestamp_ms = numbers.back();
+    ++li;
+    raw.push_back(std::move(frame));
+  }
+  if (raw.empty()) FormatError(name, "no frames");
+
+  ImportedSequence seq;
+  const double f = kMesaModulationFrequencyHz;
+  const double range_m = UnambiguousRangeM(f);
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  std::vector<io_internal::PixelPoint> points;
+  for (std::size_t i = 0; i < n; ++i) {
+    const RawFrame& r = raw.front();
+    if (r.channel[4][i] > 0) {
+      points.push_back({static_cast<double>(i % width), static_cast<double>(i / width),
+                        r.channel[1][i], r.channel[2][i], r.channel[0][i]});
+    }
+  }
+  seq.camera = ImportedCameraInfo(
+      "MESA SR-4000",
+      io_internal::FitPinhole(points, width, height, MesaNominalIntrinsics(width, height)), f);
+  const double t0 = raw.front().timestamp_ms;
+  for (std::size_t fi = 0; fi < raw.size(); ++fi) {
+    const RawFrame& r = raw[fi];
+    Frame frame = BlankFrame(width, height, seq.camera.model, f);
+    frame.info.sequence = fi;
+    const double dt_ns = (r.timestamp_ms - t0) * 1e6;
+    if (!(std::abs(dt_ns) < 9e18)) FormatError(name, "timestamp out of range");
+    frame.info.timestamp_ns = static_cast<std::int64_t>(std::llround(dt_ns));
+    for (std::size_t i = 0; i < n; ++i) {
+      const double z = r.channel[0][i], x = r.channel[1][i], y = r.channel[2][i];
+      const double radial_mm = 1000.0 * std::sqrt(x * x + y * y + z * z);
+      const bool ok = z > 0 && std::isfinite(radial_mm) && r.channel[4][i] > 0;
+      SetDistanceMm(frame, i, ok ? radial_mm : 0.0, range_m);
+      SetAmplitude(frame, i, r.channel[3][i]);
+    }
+    seq.frames.push_back(std::move(frame));
+  }
+  return seq;
+}
+
+ImportedSequence ImportMesaDat(const std::filesystem::path& dat_file) {
+  // The parsed values take about 20 times the text's size in memory: cap the file at 256 MiB.
+  return ParseMesaDat(ReadFile(dat_file, std::size_t{1} << 28), dat_file.string());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dispatch
+
+std::vector<std::string> ImportFormats() {
+  return {"adi-interleaved", "adi-raw", "azure-kinect", "ifm-o3d3xx", "mesa-dat"};
+}
+
+namespace {
+std::vector<std::string> SplitComma(const std::string& s) {
+  std::vector<std::string> parts;
+  std::size_t pos = 0;
+  while (true) {
+    const std::size_t c = s.find(',', pos);
+    parts.push_back(s.substr(pos, c == std::string::npos ? std::string::npos : c - pos));
+    if (c == std::string::npos) break;
+    pos = c + 1;
+  }
+  return parts;
+}
+}  // namespace
+
+ImportedSequence ImportFromSpec(const std::string& spec) {
+  const std::size_t colon = spec.find(':');
+  const std::string format = spec.substr(0, colon);
+  const std::string rest = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  auto bad = [&](const std::string& why) -> Error {
+    return Error(ErrorCode::kInvalidArgument, "import spec '" + spec + "': " + why);
+  };
+  if (colon == std::string::npos || rest.empty()) throw bad("expected <format>:<path>");
+  const auto parts = SplitComma(rest);
+  if (format == "ifm-o3d3xx") return ImportIfmO3d3xx(rest);
+  if (format == "adi-interleaved") return ImportAdiInterleaved(rest);
+  if (format == "mesa-dat") return ImportMesaDat(rest);
+  if (format == "adi-raw") {
+    if (parts.size() == 2) return ImportAdiRaw(parts[0], parts[1]);
+    if (parts.size() != 1) throw bad("expected <depth.bin>[,<ir.bin>]");
+    const std::filesystem::path depth = parts[0];
+    std::string ir_name = depth.filename().string();
+    const std::size_t at = ir_name.rfind("depth");
+    if (at == std::string::npos) throw bad("cannot derive the IR file name; give <depth>,<ir>");
+    ir_name.replace(at, 5, "ir");
+    return ImportAdiRaw(depth, depth.parent_path() / ir_name);
+  }
+  if (format == "azure-kinect") {
+    if (parts.size() == 3) return ImportAzureKinect(parts[0], parts[1], parts[2]);
+    if (parts.size() != 1) throw bad("expected <dir> or <depth.bin>,<ir.bin>,<calibration.json>");
+    const std::filesystem::path dir = parts[0];
+    return ImportAzureKinect(dir / "depth_640x576_u16le.bin", dir / "ir_640x576_u16le.bin",
+                             dir / "calibration.json");
+  }
+  std::string known;
+  for (const auto& f : ImportFormats()) known += (known.empty() ? "" : ", ") + f;
+  throw bad("unknown format '" + format + "' (known: " + known + ")");
+}
+
+// ---------------------------------------------------------------------------------------------
+// ImportedCamera
+
+ImportedCamera::ImportedCamera(ImportedSequence sequence, bool loop)
+    : sequence_(std::move(sequence)), loop_(loop) {
+  if (sequence_.frames.empty()) {
+    throw Error(ErrorCode::kFormat, "imported " + sequence_.camera.model + " sequence is empty");
+  }
+}
+
+const FrameInfo& ImportedCamera::NextInfo() const {
+  return sequence_.frames[std::min(next_, sequence_.frames.size() - 1)].info;
+}
+
+std::optional<Frame> ImportedCamera::Grab() {
+  if (next_ >= sequence_.frames.size()) {
+    if (!loop_) return std::nullopt;
+    next_ = 0;
+  }
+  return sequence_.frames[next_++];
+}
+
+namespace {
+[[noreturn]] void ImportUnsupported(const std::string& model, const std::string& what) {
+  throw Error(ErrorCode::kUnsupported,
+              "imported " + model + " data cannot change " + what + " (only the recorded value)");
+}
+}  // namespace
+
+void ImportedCamera::SetIntegrationTimeRegister(int reg) {
+  if (reg != IntegrationTimeRegister()) {
+    ImportUnsupported(sequence_.camera.model, "the integration time to " + std::to_string(reg));
+  }
+}
+int ImportedCamera::IntegrationTimeRegister() const { return NextInfo().integration_time_register; }
+void ImportedCamera::SetModulationFrequencyHz(double hz) {
+  if (hz != sequence_.camera.modulation_frequency_hz) {
+    ImportUnsupported(sequence_.camera.model, "the modulation frequency");
+  }
+}
+void ImportedCamera::SetDistanceOffsetRegister(int reg) {
+  if (reg != DistanceOffsetRegister()) {
+    ImportUnsupported(sequence_.camera.model, "the distance offset");
+  }
+}
+int ImportedCamera::DistanceOffsetRegister() const { return NextInfo().distance_offset_register; }
+void ImportedCamera::SetPanAngleRad(double angle_rad) {
+  if (angle_rad != PanAngleRad()) ImportUnsupported(sequence_.camera.model, "the pan angle");
+}
+double ImportedCamera::PanAngleRad() const { return NextInfo().pan_angle_rad; }
+
+}  // namespace tofcam

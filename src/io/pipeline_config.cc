@@ -1,0 +1,399 @@
+#include "tofcam/io/pipeline_config.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "tofcam/core/atomic_file.h"
+#include "tofcam/core/error.h"
+#include "tofcam/io/calibration_file.h"
+
+namespace tofcam {
+namespace {
+
+// A flag mask in the file is a list of flag names (FlagName), e.g. [invalid, saturated].
+struct FlagMask {
+  std::uint16_t& bits;
+};
+
+// One description of the file's layout, walked by both the writer and the reader, so the two
+// cannot disagree about a key, its section or its type.
+template <typename V>
+void VisitOptions(V& v, PipelineOptions& o) {
+  v.Section("metric_conversion", "Stage 1: registers to metres", [&] {
+    v.Field("remove_distance_offset_register", o.metric.remove_distance_offset_register,
+            "subtract the camera's distance-offset register before scaling");
+  });
+  v.Section("calibration", "Stage 2: per-pixel offsets, eq. 1 (tofcam calibrate writes them)", [&] {
+    v.Field("file", o.calibration_file, "calibration file, \"\" = none; relative to this file");
+  });
+  v.Section("accuracy", "Stage 3: predicted inaccuracy ΔL, eq. 2", [&] {
+    v.Field("enabled", o.accuracy_enabled, "compute ΔL (the accuracy filter needs it)");
+    v.Field("scale", o.accuracy.scale, "factor on eq. 2, (0, 1e6]; 1 = the paper's formula");
+    v.Field("intensity_per_amplitude", o.accuracy.intensity_per_amplitude,
+            "I/A for sources without intensity, (0, 1e6]");
+  });
+  v.Section("filters", "Stage 5: each filter raises its own flag", [&] {
+    v.Section("range", "radial distance limits", [&] {
+      v.Field("enabled", o.filters.range_enabled, "");
+      v.Field("min_distance_m", o.filters.range.min_distance_m, "m, >= 0");
+      v.Field("max_distance_m", o.filters.range.max_distance_m, "m, > min_distance_m");
+    });
+    v.Section("amplitude", "the vendor driver's amplitude threshold", [&] {
+      v.Field("enabled", o.filters.amplitude_enabled, "");
+      v.Field("min_amplitude", o.filters.amplitude.min_amplitude, "register units, [0, 65532]");
+    });
+    v.Section("saturation", "saturation from the registers", [&] {
+      v.Field("enabled", o.filters.saturation_enabled, "");
+      v.Field("max_intensity", o.filters.saturation.max_intensity, "register units, > 0");
+      v.Field("max_amplitude", o.filters.saturation.max_amplitude, "register units, > 0");
+      v.Field("max_peak", o.filters.saturation.max_peak,
+              "intensity + amplitude, register units, > 0");
+    });
+    v.Section("accuracy", "the paper's ΔL threshold (section III-B)", [&] {
+      v.Field("enabled", o.filters.accuracy_enabled, "");
+      v.Field("max_delta_l_m", o.filters.accuracy.max_delta_l_m, "m, (0, 100]");
+    });
+    v.Section("flying_pixel", "edge-aware flying-pixel filter (libfreenect2 style)", [&] {
+      v.Field("enabled", o.filters.flying_pixel_enabled, "");
+      v.Field("min_amplitude_contrast", o.filters.flying_pixel.min_amplitude_contrast, ">= 0");
+      v.Field("amplitude_mean_floor", o.filters.flying_pixel.amplitude_mean_floor,
+              "register units, > 0");
+      v.Field("min_close_delta_m", o.filters.flying_pixel.min_close_delta_m, "m, >= 0");
+      v.Field("min_far_delta_m", o.filters.flying_pixel.min_far_delta_m, "m, >= 0");
+      v.Field("min_max_delta_m", o.filters.flying_pixel.min_max_delta_m, "m, >= 0");
+      v.Field("min_avg_delta_m", o.filters.flying_pixel.min_avg_delta_m, "m, >= 0");
+    });
+    v.Section("jump_edge", "jump-edge filter (May et al.)", [&] {
+      v.Field("enabled", o.filters.jump_edge_enabled, "");
+      v.Field("max_angle_deg", o.filters.jump_edge.max_angle_deg, "degrees, (90, 180)");
+    });
+    v.Section("weingarten", "occupied cells (Weingarten et al.)", [&] {
+      v.Field("enabled", o.filters.weingarten_enabled, "");
+      v.Field("voxel_size_m", o.filters.weingarten.voxel_size_m, "m, [0.001, 100]");
+      v.Field("min_points", o.filters.weingarten.min_points, "[1, 1000000]");
+    });
+  });
+  v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
+    v.Field("enabled", o.controller_enabled, "off: the register is left alone");
+    v.Field("kind", o.controller.kind,
+            "may-proportional, may-incremental, vendor-histogram or fixed");
+    v.Field("target_intensity", o.controller.target_intensity, "I_A, register units, (0, 65532]");
+    v.Field("gain_register_per_intensity", o.controller.gain_register_per_intensity,
+            "V_p, registers per intensity unit, [0, 1]");
+    v.Field("bias_register", o.controller.bias_register,
+            "c_0, [min_register, max_register]; also the first frame's register");
+    v.Field("min_register", o.controller.min_register, "[1, max_register]");
+    v.Field("max_register", o.controller.max_register, "[min_register, 65535]");
+    v.Section("roi", "pixels the mean intensity is taken over; rows or cols 0 = whole image", [&] {
+      v.Field("row", o.controller.roi.row, "top row, >= 0");
+      v.Field("col", o.controller.roi.col, "left column, >= 0");
+      v.Field("rows", o.controller.roi.rows, ">= 0");
+      v.Field("cols", o.controller.roi.cols, ">= 0");
+    });
+    v.Field("exclude_flags", FlagMask{o.controller.exclude_flags},
+            "pixels with these flags do not count");
+    v.Field("percent_over_pos", o.controller.percent_over_pos,
+            "vendor-histogram: % of pixels above x, [0, 100)");
+    v.Field("desired_pos", o.controller.desired_pos, "vendor-histogram: 8-bit set point, [1, 255]");
+    v.Field("vendor_gain", o.controller.vendor_gain, "vendor-histogram: step fraction, (0, 1]");
+    v.Field("vendor_max_step_register", o.controller.vendor_max_step_register,
+            "vendor-histogram: largest step, >= 1");
+    v.Field("vendor_deadband", o.controller.vendor_deadband, "vendor-histogram: [0, 254]");
+  });
+  v.Section("point_cloud", "Stage 6: organised cloud in the camera frame", [&] {
+    v.Field("enabled", o.cloud_enabled, "");
+    v.Field("nan_flags", FlagMask{o.cloud.nan_mask}, "points with these flags get NaN x, y, z");
+  });
+  v.Section("false_color", "Stage 7: display (section III-A)", [&] {
+    v.Field("near_m", o.color.near_m, "distance shown yellow, m, >= 0");
+    v.Field("far_m", o.color.far_m, "distance shown blue, m, > near_m; 0 = L");
+    v.Field("out_of_range_black", o.color.out_of_range_black, "");
+    v.Field("amplitude_shading", o.color.amplitude_shading, "");
+    v.Field("shading_reference_amplitude", o.color.shading_reference_amplitude,
+            "register units, > 0");
+    v.Field("shading_min_value", o.color.shading_min_value, "[0, 1]");
+    v.Field("legend", o.color_legend, "append the legend bar");
+  });
+  v.Section("stats", "per-frame statistics against ground truth", [&] {
+    v.Field("bad_error_m", o.stats.bad_error_m, "a pixel is bad beyond this error, m, (0, 100]");
+  });
+}
+
+// --- Writer ----------------------------------------------------------------------------------
+
+std::string FormatDouble(double value) {
+  if (std::isnan(value)) return ".nan";
+  if (std::isinf(value)) return value > 0 ? ".inf" : "-.inf";
+  char buffer[64];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
+  std::string text(buffer, result.ptr);
+  // "1e-05" is a string in YAML 1.1 core schemas that lack the dot; yaml-cpp reads it as a
+  // number either way, but an explicit ".0" keeps floats recognisable to other readers.
+  if (text.find_first_of(".eEn") == std::string::npos) text += ".0";
+  return text;
+}
+
+std::string Quote(const std::string& text) {
+  std::string out = "\"";
+  for (const char c : text) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+class Writer {
+ public:
+  template <typename F>
+  void Section(const char* key, const char* doc, F&& body) {
+    Line(key + std::string(":"), doc);
+    ++depth_;
+    body();
+    --depth_;
+  }
+  void Field(const char* key, bool& value, const char* doc) {
+    Scalar(key, value ? "true" : "false", doc);
+  }
+  void Field(const char* key, int& value, const char* doc) {
+    Scalar(key, std::to_string(value), doc);
+  }
+  void Field(const char* key, double& value, const char* doc) {
+    Scalar(key, FormatDouble(value), doc);
+  }
+  void Field(const char* key, std::string& value, const char* doc) {
+    Scalar(key, Quote(value), doc);
+  }
+  void Field(const char* key, ControllerKind& value, const char* doc) {
+    Scalar(key, std::string(ControllerKindName(value)), doc);
+  }
+  void Field(const char* key, FlagMask mask, const char* doc) {
+    std::string list;
+    for (const Flag f : kAllFlags) {
+      if (!PixelFlags(mask.bits).Has(f)) continue;
+      if (!list.empty()) list += ", ";
+      list += FlagName(f);
+    }
+    Scalar(key, "[" + list + "]", doc);
+  }
+
+  std::string text;
+
+ private:
+  void Scalar(const char* key, const std::string& value, const char* doc) {
+    Line(std::string(key) + ": " + value, doc);
+  }
+  void Line(const std::string& content, const char* doc) {
+    text.append(static_cast<std::size_t>(depth_) * 2, ' ');
+    text += content;
+    if (doc != nullptr && *doc != '\0') {
+      text += "  # ";
+      text += doc;
+    }
+    text += '\n';
+  }
+  int depth_ = 0;
+};
+
+// --- Reader ----------------------------------------------------------------------------------
+
+class Reader {
+ public:
+  Reader(const YAML::Node& root, std::string source) : source_(std::move(source)) {
+    nodes_.push_back(root);
+    known_.emplace_back();
+  }
+
+  template <typename F>
+  void Section(const char* key, const char* /*doc*/, F&& body) {
+    const YAML::Node child = Lookup(key);
+    if (child && !child.IsNull() && !child.IsMap()) {
+      Fail(child, std::string("'") + Path(key) + "' must be a mapping");
+    }
+    path_.emplace_back(key);
+    nodes_.push_back(child && child.IsMap() ? child : YAML::Node());
+    known_.emplace_back();
+    body();
+    CheckUnknownKeys();
+    known_.pop_back();
+    nodes_.pop_back();
+    path_.pop_back();
+  }
+
+  void Field(const char* key, bool& value, const char* /*doc*/) {
+    const YAML::Node node = Lookup(key);
+    if (!node) return;
+    bool parsed = false;
+    if (!node.IsScalar() || !YAML::convert<bool>::decode(node, parsed)) {
+      Fail(node, TypeMessage(key, "true or false", node));
+    }
+    value = parsed;
+  }
+  void Field(const char* key, int& value, const char* /*doc*/) {
+    const YAML::Node node = Lookup(key);
+    if (!node) return;
+    const std::string text = node.IsScalar() ? node.Scalar() : std::string();
+    long long parsed = 0;
+    const auto result = std::from_chars(text.data(), text.data() + text.size(), parsed);
+    if (!node.IsScalar() || text.empty() || result.ec != std::errc() ||
+        result.ptr != text.data() + text.size() || parsed < std::numeric_limits<int>::min() ||
+        parsed > std::numeric_limits<int>::max()) {
+      Fail(node, TypeMessage(key, "an integer", node));
+    }
+    value = static_cast<int>(parsed);
+  }
+  void Field(const char* key, double& value, const char* /*doc*/) {
+    const YAML::Node node = Lookup(key);
+    if (!node) return;
+    double parsed = 0.0;
+    if (!node.IsScalar() || !YAML::convert<double>::decode(node, parsed)) {
+      Fail(node, TypeMessage(key, "a number", node));
+    }
+    value = parsed;
+  }
+  void Field(const char* key, std::string& value, const char* /*doc*/) {
+    const YAML::Node node = Lookup(key);
+    if (!node) return;
+    if (node.IsNull()) {
+      value.clear();
+      return;
+    }
+    if (!node.IsScalar()) Fail(node, TypeMessage(key, "a string", node));
+    value = node.Scalar();
+  }
+  void Field(const char* key, ControllerKind& value, const char* /*doc*/) {
+    const YAML::Node node = Lookup(key);
+    if (!node) return;
+    if (!node.IsScalar()) Fail(node, TypeMessage(key, "a controller name", node));
+    try {
+      value = ParseControllerKind(node.Scalar());
+    } catch (const Error& e) {
+      Fail(node, "'" + Path(key) + "': " + e.what());
+    }
+  }
+  void Field(const char* key, FlagMask mask, const char* /*doc*/) {
+    const YAML::Node node = Lookup(key);
+    if (!node) return;
+    if (!node.IsSequence()) Fail(node, TypeMessage(key, "a list of flag names", node));
+    std::uint16_t bits = 0;
+    for (const YAML::Node& item : node) {
+      if (!item.IsScalar()) Fail(item, TypeMessage(key, "a list of flag names", item));
+      try {
+        bits =
+            static_cast<std::uint16_t>(bits | static_cast<std::uint16_t>(ParseFlag(item.Scalar())));
+      } catch (const Error& e) {
+        Fail(item, "'" + Path(key) + "': " + e.what());
+      }
+    }
+    mask.bits = bits;
+  }
+
+  void CheckUnknownKeys() {
+    const YAML::Node& node = nodes_.back();
+    if (!node || !node.IsMap()) return;
+    const std::vector<std::string>& known = known_.back();
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      const std::string key = it->first.Scalar();
+      bool found = false;
+      for (const std::string& k : known) found = found || k == key;
+      if (found) continue;
+      std::string list;
+      for (const std::string& k : known) list += (list.empty() ? "" : ", ") + k;
+      Fail(it->first, "unknown key '" + Path(key.c_str()) + "' (known here: " + list + ")");
+    }
+  }
+
+ private:
+  // The child `key` of the current mapping (undefined when absent); remembers it as known.
+  YAML::Node Lookup(const char* key) {
+    known_.back().emplace_back(key);
+    const YAML::Node& parent = nodes_.back();
+    if (!parent || !parent.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
+    const YAML::Node child = parent[key];
+    return child ? child : YAML::Node(YAML::NodeType::Undefined);
+  }
+
+  std::string Path(const char* key) const {
+    std::string out;
+    for (const std::string& p : path_) out += p + ".";
+    return out + key;
+  }
+
+  std::string TypeMessage(const char* key, const char* expected, const YAML::Node& node) const {
+    std::string got = node.IsScalar()     ? "'" + node.Scalar() + "'"
+                      : node.IsMap()      ? std::string("a mapping")
+                      : node.IsSequence() ? std::string("a list")
+                                          : std::string("nothing");
+    return "'" + Path(key) + "' must be " + expected + ", got " + got;
+  }
+
+  [[noreturn]] void Fail(const YAML::Node& node, const std::string& message) const {
+    throw Error(ErrorCode::kFormat,
+                source_ + ":" + std::to_string(node.Mark().line + 1) + ": " + message);
+  }
+
+  std::string source_;
+  std::vector<YAML::Node> nodes_;
+  std::vector<std::vector<std::string>> known_;
+  std::vector<std::string> path_;
+};
+
+}  // namespace
+
+PipelineOptions ParsePipelineConfig(std::string_view yaml_text, const std::string& source,
+                                    const std::filesystem::path& base_dir) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(std::string(yaml_text));
+  } catch (const YAML::Exception& e) {
+    throw Error(ErrorCode::kFormat,
+                source + ":" + std::to_string(e.mark.line + 1) + ": not YAML: " + e.msg);
+  }
+  if (root && !root.IsNull() && !root.IsMap()) {
+    throw Error(ErrorCode::kFormat, source + ":" + std::to_string(root.Mark().line + 1) +
+                                        ": a pipeline configuration must be a mapping");
+  }
+  PipelineOptions options;
+  Reader reader(root.IsMap() ? root : YAML::Node(), source);
+  VisitOptions(reader, options);
+  reader.CheckUnknownKeys();
+
+  if (!options.calibration_file.empty() && !base_dir.empty()) {
+    const std::filesystem::path file(options.calibration_file);
+    if (file.is_relative()) options.calibration_file = (base_dir / file).string();
+  }
+  try {
+    options.Validate();
+  } catch (const Error& e) {
+    throw Error(e.code(), source + ": " + e.what());
+  }
+  return options;
+}
+
+PipelineOptions LoadPipelineConfig(const std::filesystem::path& path) {
+  const std::string text = ReadFile(path, std::size_t{1} << 20);
+  return ParsePipelineConfig(text, path.string(), path.parent_path());
+}
+
+std::string PipelineConfigToYaml(const PipelineOptions& options) {
+  Writer writer;
+  writer.text =
+      "# tofcam pipeline configuration (docs/pipeline.md). Keys left out keep their defaults.\n";
+  PipelineOptions copy = options;  // the visitor takes references; the writer only reads
+  VisitOptions(writer, copy);
+  return writer.text;
+}
+
+void LoadPipelineCalibration(PipelineOptions& options, const CameraInfo& camera) {
+  if (!options.calibration && !options.calibration_file.empty()) {
+    options.calibration = LoadCalibration(options.calibration_file);
+  }
+  if (options.calibration) CheckCalibrationMatches(*options.calibration, camera);
+}
+
+}  // namespace tofcam

@@ -1,0 +1,306 @@
+#include "tofcam/calibration/calibration_procedure.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+#include <string>
+
+#include "fake_wall_camera.h"
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+namespace {
+
+using testing::FakeWallCamera;
+using testing::FakeWallOptions;
+
+constexpr double kL20 = 7.49481145;
+
+WallCalibrationOptions FastOptions(double distance_m) {
+  WallCalibrationOptions o;
+  o.wall_distance_m = distance_m;
+  o.frames = 40;
+  o.warmup_window_frames = 60;
+  o.warmup_max_frames = 3000;
+  // 2 mm/s: the fake's 20 s time constant gets there in under a minute of camera time.
+  o.warmup_max_drift_m_per_s = 2e-3;
+  return o;
+}
+
+TEST(WallRadialDistanceTest, RayPlaneIntersection) {
+  CameraIntrinsics k;
+  k.width = 3;
+  k.height = 3;
+  k.fx_px = 2.0;
+  k.fy_px = 4.0;
+  k.cx_px = 1.0;
+  k.cy_px = 1.0;
+  const Image<float> t = WallRadialDistance(k, 2.0, {0.0, 0.0, 1.0});
+  EXPECT_NEAR(t(1, 1), 2.0, 1e-6);                                   // optical axis
+  EXPECT_NEAR(t(1, 2), 2.0 * std::sqrt(1.0 + 0.25), 1e-6);           // x = 1/2
+  EXPECT_NEAR(t(0, 0), 2.0 * std::sqrt(1.0 + 0.25 + 0.0625), 1e-6);  // x = -1/2, y = -1/4
+  // Wall turned 45° about y: n = (1, 0, 1)/sqrt(2), plane n.x = 2. Axis ray: t = 2 sqrt(2).
+  const Image<float> tilted = WallRadialDistance(k, 2.0, {1.0, 0.0, 1.0});
+  EXPECT_NEAR(tilted(1, 1), 2.0 * std::sqrt(2.0), 1e-5);
+  // Pixel (1, 2): ray (0.5, 0, 1)/|.|; n.r = 1.5 / (sqrt(2) sqrt(1.25)); t = 2 / n.r.
+  EXPECT_NEAR(tilted(1, 2), 2.0 * std::sqrt(2.0) * std::sqrt(1.25) / 1.5, 1e-5);
+  EXPECT_THROW((void)WallRadialDistance(k, 2.0, {0.0, 0.0, -1.0}), Error);
+}
+
+TEST(CalibrateOffsetsTest, RecoversTheOffsetPatternAfterWarmup) {
+  FakeWallOptions fo;
+  fo.drift_amplitude_m = 0.2;
+  fo.drift_time_constant_s = 20.0;
+  FakeWallCamera camera(fo);
+  std::set<std::string> phases;
+  WallCalibrationReport report;
+  const OffsetCalibration c = CalibrateOffsets(
+      camera, FastOptions(1.5),
+      [&](const CalibrationProgress& p) { phases.insert(std::string(p.phase)); }, &report);
+  EXPECT_EQ(phases, (std::set<std::string>{"exposure", "warm-up", "averaging"}));
+  EXPECT_EQ(c.width, 40);
+  EXPECT_EQ(c.camera_model, "FAKE");
+  EXPECT_EQ(c.frames_averaged, 40);
+  EXPECT_TRUE(c.pixel_flags.empty());
+  EXPECT_NO_THROW(c.Validate());
+  // Exposure: median intensity at 62 * 256 = 15872 (± the deadband of 2 * 256). I = 3000 reg /
+  // t^2 with t = 1.5 m on the axis and up to 1.14 x 1.5 m at the corners: register 12 or 13.
+  EXPECT_GE(report.integration_register, 12);
+  EXPECT_LE(report.integration_register, 13);
+  EXPECT_EQ(c.integration_time_register, report.integration_register);
+  // Warm-up: drift 200 mm e^(-t/20 s), rate 10 e^(-t/20) mm/s, 2 mm/s at t = 20 ln 5 = 32.2 s
+  // = frame 966 from power-on (exposure frames included). The 60-frame regression lags by 1 s
+  // and has a noise of ~0.08 mm/s (per-frame mean good to 12 mm / sqrt(1240) = 0.34 mm):
+  // it ends within frames 900..1100.
+  const int settled_at = report.exposure_frames + report.warmup_frames;
+  EXPECT_GT(settled_at, 900);
+  EXPECT_LT(settled_at, 1100);
+  EXPECT_LE(std::abs(report.drift_m_per_s), 2e-3);
+  // Offsets = the pattern plus the drift left at averaging time; the drift is common to all
+  // pixels, so compare after removing the mean difference.
+  const double drift_now = camera.Drift();
+  double sum = 0.0, sum2 = 0.0, max_err = 0.0;
+  const int n = 40 * 31;
+  for (int r = 0; r < 31; ++r) {
+    for (int col = 0; col < 40; ++col) {
+      const double err = c.offset_m(r, col) - camera.TrueOffset(r, col);
+      sum += err;
+      sum2 += err * err;
+    }
+  }
+  const double mean = sum / n;
+  for (int r = 0; r < 31; ++r) {
+    for (int col = 0; col < 40; ++col) {
+      max_err = std::max(max_err, std::abs(c.offset_m(r, col) - camera.TrueOffset(r, col) - mean));
+    }
+  }
+  const double rms = std::sqrt(sum2 / n - mean * mean);
+  // The mean error is the drift at mid-averaging: 2 mm/s x 0.67 s above the drift now.
+  EXPECT_NEAR(mean, drift_now, 3e-3);
+  // Noise: σ = (2/π) ΔL ≈ 12 mm per frame at I ≈ 16000 (up to 14 mm in the dimmer corners);
+  // averaged over 40 frames σ/sqrt(40) ≈ 2 mm; the RMS must be at that level and no pixel
+  // beyond 5 σ of the corners (11 mm).
+  EXPECT_LT(rms, 3e-3);
+  EXPECT_LT(max_err, 0.011);
+  EXPECT_NEAR(report.noise_sigma_m, 0.012, 0.006);
+}
+
+TEST(CalibrateOffsetsTest, WrapAtTheSeamIsAveragedAsPhasors) {
+  // Narrow field of view; wall at L - 0.3 m and every pixel 0.3 m long: the measurements
+  // straddle the 0 / L seam (half near 0, half near L). A naive mean would be off by ~L/2.
+  FakeWallOptions fo;
+  fo.width = 8;
+  fo.height = 6;
+  fo.fx_px = 400.0;
+  fo.fy_px = 400.0;
+  fo.pattern = false;
+  fo.constant_offset_m = 0.3;
+  fo.wall_distance_m = kL20 - 0.3;
+  fo.signal_per_register_at_1m = 3000.0 * 56.0 / 2.25;  // same exposure as 1.5 m
+  FakeWallCamera camera(fo);
+  WallCalibrationOptions o = FastOptions(kL20 - 0.3);
+  o.warmup_window_frames = 10;
+  const OffsetCalibration c = CalibrateOffsets(camera, o);
+  for (int r = 0; r < 6; ++r) {
+    for (int col = 0; col < 8; ++col) {
+      // Noise per frame ≈ 12 mm, 40 frames: 2 mm; 10 mm is 5 σ.
+      EXPECT_NEAR(c.offset_m(r, col), 0.3, 0.01) << r << "," << col;
+    }
+  }
+  // Applying it brings the wrapped measurements back to the wall: e.g. m = 0.05 (wrapped)
+  // -> (0.05 - 0.3 + L) mod L = L - 0.25, the wall at L - 0.3 plus 5 cm of noise.
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(8, 6, 0.05f);
+  m.amplitude = Image<float>(8, 6, 1.0f);
+  m.flags = Image<PixelFlags>(8, 6);
+  EXPECT_NEAR(ApplyCalibration(m, c).radial_distance_m(0, 0), kL20 - 0.25, 0.011);
+}
+
+TEST(CalibrateOffsetsTest, NeverSettlingDriftIsAClearError) {
+  FakeWallOptions fo;
+  fo.drift_linear_m_per_s = 0.01;  // 10 mm/s forever
+  FakeWallCamera camera(fo);
+  WallCalibrationOptions o = FastOptions(1.5);
+  o.warmup_max_frames = 200;
+  try {
+    (void)CalibrateOffsets(camera, o);
+    FAIL() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("still drifts by 9."), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("200 warm-up frames"), std::string::npos) << e.what();
+  }
+}
+
+TEST(CalibrateOffsetsTest, OscillatingControllerIsAClearError) {
+  FakeWallCamera camera(FakeWallOptions{});
+  WallCalibrationOptions o = FastOptions(1.5);
+  // 1333 intensity per register on the axis: V_p = 0.01 overshoots by a factor of ~13.
+  o.controller.kind = ControllerKind::kMayIncremental;
+  o.controller.gain_register_per_intensity = 0.01;
+  o.controller_max_frames = 50;
+  try {
+    (void)CalibrateOffsets(camera, o);
+    FAIL() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("did not settle within 50 frames"), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(CalibrateOffsetsTest, BlockedPixelsAreFlaggedOrRejected) {
+  FakeWallOptions fo;
+  fo.blocked_columns = 2;  // 2 of 40 columns: 5 % of the pixels
+  FakeWallCamera camera(fo);
+  WallCalibrationReport report;
+  const OffsetCalibration c = CalibrateOffsets(camera, FastOptions(1.5), {}, &report);
+  EXPECT_EQ(report.uncalibrated_pixels, 2 * 31);
+  ASSERT_FALSE(c.pixel_flags.empty());
+  EXPECT_TRUE(c.pixel_flags(5, 1).Has(Flag::kInvalid));
+  EXPECT_TRUE(c.pixel_flags(5, 2).None());
+
+  fo.blocked_columns = 10;  // 25 %
+  FakeWallCamera blocked(fo);
+  try {
+    (void)CalibrateOffsets(blocked, FastOptions(1.5));
+    FAIL() << "expected Error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+    EXPECT_NE(std::string(e.what()).find("310 of 1240 pixels"), std::string::npos) << e.what();
+  }
+}
+
+TEST(CalibrateOffsetsTest, RejectsBadOptions) {
+  FakeWallCamera camera(FakeWallOptions{});
+  const auto code = [&](auto mutate) {
+    WallCalibrationOptions o = FastOptions(1.5);
+    mutate(o);
+    try {
+      (void)CalibrateOffsets(camera, o);
+    } catch (const Error& e) {
+      return e.code();
+    }
+    return ErrorCode::kInternal;
+  };
+  const auto bad = ErrorCode::kInvalidArgument;
+  EXPECT_EQ(code([](auto& o) { o.wall_distance_m = 0; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.wall_distance_m = 8.0; }), bad);  // beyond L
+  EXPECT_EQ(code([](auto& o) { o.wall_distance_m = std::nan(""); }), bad);
+  EXPECT_EQ(code([](auto& o) { o.wall_normal = {0, 0, 0}; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.frames = 0; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.warmup_window_frames = 2; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.warmup_max_frames = 10; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.warmup_max_drift_m_per_s = 0; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.min_valid_fraction = 0; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.max_uncalibrated_fraction = 1.5; }), bad);
+  EXPECT_EQ(code([](auto& o) { o.controller.target_intensity = -1; }), bad);
+}
+
+TEST(SweepTest, DistanceCorrectionRemovesWiggling) {
+  FakeWallOptions fo;
+  fo.wiggle_amplitude_m = 0.03;  // ±30 mm with period L/4 = 1.87 m
+  FakeWallCamera camera(fo);
+  WallCalibrationOptions wall = FastOptions(1.5);
+  wall.warmup_window_frames = 10;
+  const OffsetCalibration base = CalibrateOffsets(camera, wall);
+
+  SweepOptions s;
+  s.from_m = 0.5;
+  s.to_m = 7.0;
+  s.step_m = 0.25;
+  s.frames_per_distance = 10;
+  s.wall = wall;
+  int calls = 0;
+  SweepReport report;
+  const OffsetCalibration full = CalibrateDistanceCorrection(
+      base,
+      [&](double d) -> Camera& {
+        ++calls;
+        camera.MoveWall(d);
+        return camera;
+      },
+      s, {}, &report);
+  EXPECT_EQ(calls, 27 + 26);  // 0.5, 0.75, ..., 7.0 and the 26 midpoints
+  ASSERT_TRUE(full.distance_correction.has_value());
+  EXPECT_EQ(report.distances.size(), 53u);
+  for (const SweepDistanceResult& d : report.distances) {
+    EXPECT_GT(d.pixels, 700) << d.wall_distance_m;  // corners beyond L drop out near 7 m
+    // Every distance, not only on average: after <= noise floor + 3 mm. Below 1 m the radial
+    // distances one wall sees ([d, 1.14 d]) leave gaps between 0.25 m steps that the table
+    // bridges linearly; the worst of them (0.875 m) sits ~2.6 mm above the floor.
+    EXPECT_LT(d.rms_after_m, d.noise_floor_m + 0.003) << d.wall_distance_m;
+  }
+  // Before: the paper's offsets leave w(t) - w(t_wall) of a ±30 mm sine: RMS around 25 mm.
+  EXPECT_GT(report.held_out_rms_before_m, 0.015);
+  // After: at the noise floor of 10-frame averages (a few mm), far below the wiggling.
+  EXPECT_LT(report.held_out_rms_after_m, report.held_out_rms_before_m / 4);
+  EXPECT_LT(report.held_out_rms_after_m, 2.0 * report.held_out_noise_floor_m + 0.002)
+      << "noise floor " << report.held_out_noise_floor_m;
+  // The correction carries the whole wiggling: 60 mm peak to peak over one period.
+  const DistanceCorrection& g = *full.distance_correction;
+  double lo = 1.0, hi = -1.0;
+  for (double d = 2.0; d < 2.0 + 1.874; d += 0.01) {
+    lo = std::min(lo, g.Evaluate(d));
+    hi = std::max(hi, g.Evaluate(d));
+  }
+  EXPECT_NEAR(hi - lo, 0.06, 0.006);
+}
+
+TEST(SweepTest, RejectsBadOptions) {
+  FakeWallCamera camera(FakeWallOptions{});
+  OffsetCalibration base;
+  base.camera_model = "FAKE";
+  base.width = 40;
+  base.height = 31;
+  base.offset_m = Image<float>(40, 31);
+  const WallCameraSource source = [&](double) -> Camera& { return camera; };
+  const auto code = [&](auto mutate) {
+    SweepOptions s;
+    mutate(s);
+    try {
+      (void)CalibrateDistanceCorrection(base, source, s);
+    } catch (const Error& e) {
+      return e.code();
+    }
+    return ErrorCode::kInternal;
+  };
+  const auto bad = ErrorCode::kInvalidArgument;
+  EXPECT_EQ(code([](auto& s) { s.from_m = 0; }), bad);
+  EXPECT_EQ(code([](auto& s) { s.to_m = 0.2; }), bad);
+  EXPECT_EQ(code([](auto& s) { s.to_m = 7.6; }), bad);  // beyond L
+  EXPECT_EQ(code([](auto& s) { s.step_m = 0; }), bad);
+  EXPECT_EQ(code([](auto& s) { s.step_m = 1e-5; }), bad);  // too many distances
+  EXPECT_EQ(code([](auto& s) { s.lut_step_m = 0; }), bad);
+  EXPECT_EQ(code([](auto& s) { s.refine_iterations = -1; }), bad);
+  EXPECT_EQ(code([](auto& s) { s.outlier_m = 4.0; }), bad);
+  base.width = 41;
+  base.offset_m = Image<float>(41, 31);
+  EXPECT_EQ(code([](auto&) {}), ErrorCode::kMismatch);
+}
+
+}  // namespace
+}  // namespace tofcam

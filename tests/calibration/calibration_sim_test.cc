@@ -1,0 +1,139 @@
+// End-to-end: the calibration procedure on the simulated SR-2 facing the built-in `wall` scene
+// (every simulator effect on), checked against the simulator's ground truth.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tofcam/accuracy/delta_l.h"
+#include "tofcam/calibration/calibration_procedure.h"
+#include "tofcam/pipeline/metric_conversion.h"
+#include "tofcam/sim/simulated_camera.h"
+
+namespace tofcam {
+namespace {
+
+std::unique_ptr<sim::SimulatedCamera> WallCamera(double distance_m, std::uint64_t seed) {
+  sim::SimulatorOptions o;
+  o.seed = seed;
+  o.supersampling = 1;  // a flat wall has no edges to anti-alias
+  return std::make_unique<sim::SimulatedCamera>(
+      sim::LoadBuiltinScene("wall", {{"distance_m", std::to_string(distance_m)}}),
+      sim::ResolveCameraModel("sr2"), o);
+}
+
+WallCalibrationOptions Options(double distance_m) {
+  WallCalibrationOptions o;
+  o.wall_distance_m = distance_m;
+  o.frames = 30;
+  o.warmup_window_frames = 60;
+  return o;
+}
+
+TEST(CalibrationSimTest, WallCalibrationMatchesTheSimulatedFixedPattern) {
+  auto camera = WallCamera(2.0, 1);
+  WallCalibrationReport report;
+  const OffsetCalibration c = CalibrateOffsets(*camera, Options(2.0), {}, &report);
+  EXPECT_EQ(c.camera_model, camera->Info().model);
+  EXPECT_EQ(report.uncalibrated_pixels, 0);
+  // The offset must reproduce the simulator's fixed-pattern map up to one constant (warm-up
+  // drift, exposure offset and the wiggling at 2 m are common to all pixels, apart from the
+  // wiggling's change across the wall's 2.0..2.3 m of radial distance) and the noise of 30
+  // averaged frames.
+  const Image<float>& fpn = camera->FixedPatternOffsetM();
+  double mean = 0.0;
+  for (std::size_t i = 0; i < fpn.size(); ++i) mean += c.offset_m[i] - fpn[i];
+  mean /= static_cast<double>(fpn.size());
+  double sum2 = 0.0;
+  for (std::size_t i = 0; i < fpn.size(); ++i) {
+    const double e = c.offset_m[i] - fpn[i] - mean;
+    sum2 += e * e;
+  }
+  const double rms = std::sqrt(sum2 / static_cast<double>(fpn.size()));
+  const double noise = report.noise_sigma_m / std::sqrt(30.0);
+  std::printf(
+      "wall 2 m: register %d, offsets rms %.2f mm, vs fixed pattern %.2f mm, noise of the "
+      "average %.2f mm, warm-up %d frames\n",
+      report.integration_register, report.offset_rms_m * 1e3, rms * 1e3, noise * 1e3,
+      report.warmup_frames);
+  // Wiggling ±30 mm with period 1.87 m changes by up to ~15 mm over 0.3 m of radial distance;
+  // its spread across the image is part of this RMS.
+  EXPECT_LT(rms, noise + 0.012);
+  EXPECT_GT(report.offset_rms_m, 0.01);  // the camera was visibly wrong before
+}
+
+TEST(CalibrationSimTest, SweepBringsHeldOutDistancesToTheNoiseLevel) {
+  auto first = WallCamera(2.0, 2);
+  const OffsetCalibration base = CalibrateOffsets(*first, Options(2.0));
+  SweepOptions s;
+  s.from_m = 0.5;
+  s.to_m = 7.0;
+  s.step_m = 0.25;
+  s.frames_per_distance = 10;
+  s.wall = Options(2.0);
+  std::unique_ptr<sim::SimulatedCamera> camera;
+  std::uint64_t seed = 100;
+  SweepReport report;
+  const OffsetCalibration full = CalibrateDistanceCorrection(
+      base,
+      [&](double d) -> Camera& {
+        camera = WallCamera(d, ++seed);
+        return *camera;
+      },
+      s, {}, &report);
+  for (const SweepDistanceResult& d : report.distances) {
+    std::printf("%5.2f m %-8s reg %3d raw %6.2f  offsets %6.2f  full %6.2f  noise %5.2f mm\n",
+                d.wall_distance_m, d.held_out ? "held-out" : "fit", d.integration_register,
+                d.rms_raw_m * 1e3, d.rms_before_m * 1e3, d.rms_after_m * 1e3,
+                d.noise_floor_m * 1e3);
+  }
+  std::printf("held-out RMS: %.2f mm offsets only, %.2f mm with correction, noise %.2f mm\n",
+              report.held_out_rms_before_m * 1e3, report.held_out_rms_after_m * 1e3,
+              report.held_out_noise_floor_m * 1e3);
+  ASSERT_TRUE(full.distance_correction.has_value());
+  // Systematic part = what is left after taking the noise of the averages out in quadrature.
+  const auto systematic = [&](double rms) {
+    const double floor = report.held_out_noise_floor_m;
+    return std::sqrt(std::max(0.0, rms * rms - floor * floor));
+  };
+  std::printf("held-out systematic error: %.2f mm offsets only, %.2f mm with correction\n",
+              systematic(report.held_out_rms_before_m) * 1e3,
+              systematic(report.held_out_rms_after_m) * 1e3);
+  EXPECT_LT(report.held_out_rms_after_m, report.held_out_rms_before_m / 2);
+  // "At the noise level": the systematic part left is a fraction of the ±30 mm wiggling.
+  EXPECT_LT(systematic(report.held_out_rms_after_m), 0.008);
+}
+
+DeltaLScaleFit NoiseFit(double distance_m, int reg, std::uint64_t seed) {
+  auto camera = WallCamera(distance_m, seed);
+  camera->SetIntegrationTimeRegister(reg);
+  std::vector<MetricFrame> frames;
+  for (int i = 0; i < 30; ++i) frames.push_back(ConvertToMetric(*camera->Grab()));
+  const DeltaLScaleFit fit = FitDeltaLScale(frames);
+  std::printf(
+      "wall %.1f m, register %d: ΔL scale %.4f (median %.4f, R² %.3f, rel. rms %.3f, "
+      "%d px, %d frames)\n",
+      distance_m, reg, fit.scale, fit.median_ratio, fit.r_squared, fit.relative_rms,
+      fit.pixels_used, fit.frames);
+  return fit;
+}
+
+TEST(CalibrationSimTest, NoiseCalibrationOfEquationTwo) {
+  // The factor between ΔL (eq. 2) and the measured σ is a property of the camera: fitted on one
+  // scene and exposure it must hold on another (a different distance, 4x less light). Read
+  // noise (30 e per tap in the SR-2 model) is not in eq. 2 and weighs more at low signal, so
+  // the factor rises slowly as the light falls (measured: +12 % here); 20 % bounds that.
+  const DeltaLScaleFit a = NoiseFit(2.5, 255, 3);
+  const DeltaLScaleFit b = NoiseFit(1.5, 64, 4);
+  EXPECT_NEAR(b.scale, a.scale, 0.2 * a.scale);
+  // Eq. 2 as printed over-predicts this camera's noise (scale < 1); see docs/calibration.md.
+  EXPECT_LT(a.scale, 1.0);
+  EXPECT_GT(a.r_squared, 0.5);
+}
+
+}  // namespace
+}  // namespace tofcam

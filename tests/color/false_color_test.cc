@@ -1,0 +1,207 @@
+#include "tofcam/color/false_color.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+namespace {
+
+// Textbook HSV -> RGB (sector form, hue in degrees), written independently of the colour law's
+// closed form; channels rounded half up.
+Rgb8 Hsv(double h, double s, double v) {
+  h = std::fmod(std::fmod(h, 360.0) + 360.0, 360.0);
+  const double c = v * s;
+  const double x = c * (1.0 - std::abs(std::fmod(h / 60.0, 2.0) - 1.0));
+  const double m = v - c;
+  double r = 0, g = 0, b = 0;
+  switch (static_cast<int>(h / 60.0)) {
+    case 0:
+      r = c, g = x;
+      break;
+    case 1:
+      r = x, g = c;
+      break;
+    case 2:
+      g = c, b = x;
+      break;
+    case 3:
+      g = x, b = c;
+      break;
+    case 4:
+      r = x, b = c;
+      break;
+    default:
+      r = c, b = x;
+      break;
+  }
+  auto q = [&](double u) { return static_cast<std::uint8_t>(std::floor((u + m) * 255.0 + 0.5)); };
+  return {q(r), q(g), q(b)};
+}
+
+MetricFrame Frame(std::vector<float> d) {
+  MetricFrame f;
+  f.radial_distance_m = Image<float>(static_cast<int>(d.size()), 1);
+  for (std::size_t i = 0; i < d.size(); ++i) f.radial_distance_m[i] = d[i];
+  f.amplitude = Image<float>(static_cast<int>(d.size()), 1, 8000.0f);
+  f.flags = Image<PixelFlags>(static_cast<int>(d.size()), 1);
+  f.info.modulation_frequency_hz = 20e6;
+  return f;
+}
+
+TEST(FalseColorTest, PaperColoursAtKnownDistances) {
+  FalseColorOptions o;
+  o.near_m = 1.0;
+  o.far_m = 4.0;
+  // t = 0, 1/3, 1/2, 2/3, 1: hue 60° yellow, 0° red, 330°, 300° magenta, 240° blue.
+  const Image<Rgb8> img = FalseColor(Frame({1.0f, 2.0f, 2.5f, 3.0f, 4.0f}), o);
+  EXPECT_EQ(img[0], (Rgb8{255, 255, 0}));
+  EXPECT_EQ(img[1], (Rgb8{255, 0, 0}));
+  EXPECT_EQ(img[2], (Rgb8{255, 0, 128}));  // B = 0.5 -> 127.5 rounds up
+  EXPECT_EQ(img[3], (Rgb8{255, 0, 255}));
+  EXPECT_EQ(img[4], (Rgb8{0, 0, 255}));
+}
+
+TEST(FalseColorTest, MatchesTextbookHsvAlongTheRange) {
+  FalseColorOptions o;
+  o.near_m = 0.5;
+  o.far_m = 6.5;
+  std::vector<float> d;
+  for (int i = 0; i <= 600; ++i) d.push_back(0.5f + 0.01f * static_cast<float>(i));
+  const Image<Rgb8> img = FalseColor(Frame(d), o);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const double t = (d[i] - 0.5) / 6.0;
+    const Rgb8 want = Hsv(60.0 - 180.0 * t, 1.0, 1.0);
+    // The stage computes in float, the reference in double: a channel exactly at .5 may round
+    // either way, so allow one level.
+    EXPECT_LE(std::abs(img[i].r - want.r), 1) << d[i];
+    EXPECT_LE(std::abs(img[i].g - want.g), 1) << d[i];
+    EXPECT_LE(std::abs(img[i].b - want.b), 1) << d[i];
+  }
+}
+
+TEST(FalseColorTest, DefaultRangeIsZeroToL) {
+  const double l = UnambiguousRangeM(20e6);
+  const Image<Rgb8> img =
+      FalseColor(Frame({0.0f, static_cast<float>(l / 2), static_cast<float>(l)}), {});
+  EXPECT_EQ(img[0], (Rgb8{255, 255, 0}));
+  EXPECT_LE(std::abs(img[1].b - 128), 1);  // float t of L/2 may be 0.5 - 1 ulp
+  EXPECT_EQ(img[1].r, 255);
+  EXPECT_EQ(img[2], (Rgb8{0, 0, 255}));
+}
+
+TEST(FalseColorTest, RejectedNonFiniteAndOutOfRangePixels) {
+  MetricFrame f = Frame({2.0f, 2.0f, std::nanf(""), 0.2f, 9.0f});
+  f.flags[1] = Flag::kHighDeltaL;
+  FalseColorOptions o;
+  o.near_m = 1.0;
+  o.far_m = 4.0;
+  Image<Rgb8> img = FalseColor(f, o);
+  EXPECT_EQ(img[0], (Rgb8{255, 0, 0}));
+  EXPECT_EQ(img[1], (Rgb8{0, 0, 0}));
+  EXPECT_EQ(img[2], (Rgb8{0, 0, 0}));
+  EXPECT_EQ(img[3], (Rgb8{255, 255, 0}));  // clamped to near: fixed range, no equalisation
+  EXPECT_EQ(img[4], (Rgb8{0, 0, 255}));
+  o.out_of_range_black = true;
+  img = FalseColor(f, o);
+  EXPECT_EQ(img[3], (Rgb8{0, 0, 0}));
+  EXPECT_EQ(img[4], (Rgb8{0, 0, 0}));
+  // A truth-only bit does not blacken a pixel.
+  f.flags[0] = Flag::kMultipath;
+  EXPECT_EQ(FalseColor(f, o)[0], (Rgb8{255, 0, 0}));
+}
+
+TEST(FalseColorTest, FixedRangeDoesNotDependOnOtherPixels) {
+  FalseColorOptions o;
+  o.near_m = 1.0;
+  o.far_m = 4.0;
+  const Image<Rgb8> a = FalseColor(Frame({2.0f, 2.1f}), o);
+  const Image<Rgb8> b = FalseColor(Frame({2.0f, 3.9f}), o);
+  EXPECT_EQ(a[0], b[0]);
+}
+
+TEST(FalseColorTest, AmplitudeShadingLaw) {
+  MetricFrame f = Frame({1.0f, 1.0f, 1.0f, 1.0f});
+  f.amplitude[0] = 8000.0f;   // V = 1
+  f.amplitude[1] = 2000.0f;   // V = 0.25 + 0.75 * sqrt(1/4) = 0.625
+  f.amplitude[2] = 0.0f;      // V = 0.25
+  f.amplitude[3] = 32000.0f;  // capped at V = 1
+  FalseColorOptions o;
+  o.near_m = 1.0;
+  o.far_m = 4.0;
+  o.amplitude_shading = true;
+  const Image<Rgb8> img = FalseColor(f, o);
+  EXPECT_EQ(img[0], (Rgb8{255, 255, 0}));
+  EXPECT_EQ(img[1], (Rgb8{159, 159, 0}));  // 0.625 * 255 = 159.375
+  EXPECT_EQ(img[2], (Rgb8{64, 64, 0}));    // 0.25 * 255 = 63.75
+  EXPECT_EQ(img[3], (Rgb8{255, 255, 0}));
+}
+
+TEST(FalseColorTest, ErrorsAreReported) {
+  FalseColorOptions o;
+  o.near_m = 3.0;
+  o.far_m = 2.0;
+  EXPECT_THROW(o.Validate(), Error);
+  o = {};
+  o.near_m = 8.0;  // beyond L = 7.49 m with far_m = 0
+  EXPECT_THROW((void)FalseColor(Frame({1.0f}), o), Error);
+  o = {};
+  o.amplitude_shading = true;
+  MetricFrame f = Frame({1.0f});
+  f.amplitude = Image<float>();
+  try {
+    (void)FalseColor(f, o);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("amplitude"), std::string::npos);
+  }
+  EXPECT_THROW((void)FalseColor(MetricFrame{}, {}), Error);
+}
+
+TEST(LegendTest, AppendsBarTicksAndKeepsTheImage) {
+  Image<Rgb8> img(160, 124, Rgb8{10, 20, 30});
+  const Image<Rgb8> out = AddLegend(img, 0.0, 7.5);
+  ASSERT_EQ(out.width(), 160);
+  ASSERT_GT(out.height(), 124 + 8);
+  for (int r = 0; r < 124; ++r)
+    for (int c = 0; c < 160; ++c) ASSERT_EQ(out(r, c), img(r, c));
+  // Bar (default 8 px, 2 px below the image, margins of 2 px): yellow at the left end, blue at
+  // the right end, red at one third.
+  const int bar_row = 124 + 2 + 4;
+  EXPECT_EQ(out(bar_row, 2), (Rgb8{255, 255, 0}));
+  EXPECT_EQ(out(bar_row, 157), (Rgb8{0, 0, 255}));
+  const Rgb8 third = out(bar_row, 2 + 155 / 3);
+  EXPECT_EQ(third.r, 255);
+  EXPECT_LE(third.g + third.b, 12);  // within a pixel of pure red
+  // Ticks: white pixels just under the bar at 0 m (x = 2) and at every whole metre that fits:
+  // 155 px for 7.5 m is 20.7 px/m, enough for one-character labels at 1 m steps.
+  const int tick_row = 124 + 2 + 8;
+  int ticks = 0;
+  for (int c = 0; c < 160; ++c) ticks += out(tick_row, c) == Rgb8{255, 255, 255} ? 1 : 0;
+  EXPECT_EQ(ticks, 8);  // 0, 1, ..., 7 m
+  EXPECT_EQ(out(tick_row, 2), (Rgb8{255, 255, 255}));
+  EXPECT_EQ(out(tick_row, 2 + static_cast<int>(std::lround(155.0 / 7.5 * 4))),
+            (Rgb8{255, 255, 255}));
+  // Some label pixels exist below the ticks.
+  int text = 0;
+  for (int r = tick_row + 2; r < out.height(); ++r)
+    for (int c = 0; c < 160; ++c) text += out(r, c) == Rgb8{255, 255, 255} ? 1 : 0;
+  EXPECT_GT(text, 8 * 5);
+}
+
+TEST(LegendTest, ErrorsAreReported) {
+  EXPECT_THROW((void)AddLegend(Image<Rgb8>(8, 8), 0.0, 1.0), Error);
+  EXPECT_THROW((void)AddLegend(Image<Rgb8>(64, 8), 2.0, 1.0), Error);
+  LegendOptions o;
+  o.font_scale = 0;
+  EXPECT_THROW((void)AddLegend(Image<Rgb8>(64, 8), 0.0, 1.0, o), Error);
+}
+
+}  // namespace
+}  // namespace tofcam

@@ -1,0 +1,242 @@
+#include "tofcam/control/integration_time_controller.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+MetricFrame Uniform(float intensity, int w = 4, int h = 4) {
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(w, h, 1.0f);
+  m.amplitude = Image<float>(w, h, 100.0f);
+  m.intensity = Image<float>(w, h, intensity);
+  m.flags = Image<PixelFlags>(w, h);
+  return m;
+}
+
+ControllerOptions Opts(ControllerKind kind, double vp, int c0) {
+  ControllerOptions o;
+  o.kind = kind;
+  o.target_intensity = 16000.0;
+  o.gain_register_per_intensity = vp;
+  o.bias_register = c0;
+  return o;
+}
+
+TEST(ControllerKindTest, NamesRoundTrip) {
+  for (ControllerKind k : {ControllerKind::kMayProportional, ControllerKind::kMayIncremental,
+                           ControllerKind::kVendorHistogram, ControllerKind::kFixed}) {
+    EXPECT_EQ(ParseControllerKind(ControllerKindName(k)), k);
+    EXPECT_EQ(MakeController(Opts(k, 0.01, 50))->Name(), ControllerKindName(k));
+  }
+  EXPECT_THROW((void)ParseControllerKind("pid"), Error);
+}
+
+TEST(MayProportionalTest, PrintedLawOnHandComputedSequence) {
+  MayProportional p(Opts(ControllerKind::kMayProportional, 0.01, 50));
+  // c = -V_p (Ī - I_A) + c_0 with V_p = 0.01, I_A = 16000, c_0 = 50.
+  EXPECT_EQ(p.Update(Uniform(18000)), 30);   // -20 + 50
+  EXPECT_EQ(p.Update(Uniform(10000)), 110);  // +60 + 50
+  EXPECT_EQ(p.Update(Uniform(16000)), 50);   // on target: the bias itself
+  EXPECT_EQ(p.Update(Uniform(16000)), 50);   // position form: no memory of the past
+  EXPECT_EQ(p.Update(Uniform(40000)), 1);    // -240 + 50 clamped to the minimum
+  EXPECT_EQ(p.Update(Uniform(0)), 210);      // +160 + 50
+  ControllerOptions capped = Opts(ControllerKind::kMayProportional, 0.01, 50);
+  capped.max_register = 200;
+  capped.min_register = 10;
+  MayProportional q(capped);
+  EXPECT_EQ(q.Update(Uniform(0)), 200);
+  EXPECT_EQ(q.Update(Uniform(40000)), 10);
+  // Rounds to the nearest register: -0.001 * 2400 + 50 = 47.6.
+  MayProportional r(Opts(ControllerKind::kMayProportional, 0.001, 50));
+  EXPECT_EQ(r.Update(Uniform(18400)), 48);
+}
+
+TEST(MayIncrementalTest, AccumulatesClampsAndResets) {
+  MayIncremental c(Opts(ControllerKind::kMayIncremental, 0.01, 50));
+  EXPECT_EQ(c.Update(Uniform(18000)), 30);   // 50 - 20
+  EXPECT_EQ(c.Update(Uniform(17000)), 20);   // 30 - 10
+  EXPECT_EQ(c.Update(Uniform(16000)), 20);   // on target: holds (no steady-state offset)
+  EXPECT_EQ(c.Update(Uniform(10000)), 80);   // 20 + 60
+  EXPECT_EQ(c.Update(Uniform(0)), 240);      // 80 + 160
+  EXPECT_EQ(c.Update(Uniform(0)), 255);      // 400 clamped; the state is clamped too
+  EXPECT_EQ(c.Update(Uniform(30000)), 115);  // 255 - 140 (no wind-up beyond 255)
+  c.Reset(7);
+  EXPECT_EQ(c.Update(Uniform(16500)), 2);  // 7 - 5
+  EXPECT_EQ(c.Update(Uniform(17000)), 1);  // -8 clamped to 1
+  // Small corrections accumulate instead of rounding away: 50 - 0.2 per frame.
+  MayIncremental slow(Opts(ControllerKind::kMayIncremental, 0.0001, 50));
+  EXPECT_EQ(slow.Update(Uniform(18000)), 50);  // 49.8
+  EXPECT_EQ(slow.Update(Uniform(18000)), 50);  // 49.6
+  EXPECT_EQ(slow.Update(Uniform(18000)), 49);  // 49.4
+}
+
+TEST(ControllerTest, MeanOverRoiAndUsablePixels) {
+  MetricFrame m = Uniform(10000, 4, 4);
+  // ROI rows 1..2, cols 2..3 holds 20000; one of its pixels is invalid with a huge value and
+  // one is saturated (saturated pixels must count).
+  for (int r = 1; r <= 2; ++r)
+    for (int c = 2; c <= 3; ++c) m.intensity(r, c) = 20000;
+  m.intensity(1, 2) = 60000;
+  m.flags(1, 2) = PixelFlags(Flag::kInvalid);
+  m.intensity(2, 3) = 26000;
+  m.flags(2, 3) = PixelFlags(Flag::kSaturated);
+  const RegionOfInterest roi{1, 2, 2, 2};
+  const auto invalid = static_cast<std::uint16_t>(Flag::kInvalid);
+  EXPECT_DOUBLE_EQ(MeanControlIntensity(m, roi, invalid), (20000.0 + 20000 + 26000) / 3);
+  // Whole image: 12 pixels at 10000, 2 at 20000, 1 at 26000 (the invalid one left out).
+  EXPECT_DOUBLE_EQ(MeanControlIntensity(m, {}, invalid), (12 * 10000.0 + 40000 + 26000) / 15);
+  // A ROI leaving the frame is clipped.
+  EXPECT_DOUBLE_EQ(MeanControlIntensity(m, {3, 3, 10, 10}, invalid), 10000.0);
+  // No usable pixel: NaN, and the controllers hold their register.
+  m.flags.Fill(PixelFlags(Flag::kInvalid));
+  EXPECT_TRUE(std::isnan(MeanControlIntensity(m, {}, invalid)));
+  ControllerOptions o = Opts(ControllerKind::kMayProportional, 0.01, 50);
+  o.roi = roi;
+  MayProportional p(o);
+  EXPECT_EQ(p.Update(Uniform(18000)), 30);
+  EXPECT_EQ(p.Update(m), 30);
+  MayIncremental inc(Opts(ControllerKind::kMayIncremental, 0.01, 50));
+  EXPECT_EQ(inc.Update(m), 50);
+}
+
+TEST(ControllerTest, AmplitudeWithoutIntensityChannel) {
+  MetricFrame m = Uniform(0);
+  m.intensity = Image<float>();
+  m.amplitude.Fill(17000.0f);
+  MayProportional p(Opts(ControllerKind::kMayProportional, 0.01, 50));
+  EXPECT_EQ(p.Update(m), 40);  // D = 17000 - 16000 on the amplitude
+}
+
+// 100 pixels: 90 in 8-bit bin 20, 10 in bin 100.
+MetricFrame TwoLevels() {
+  MetricFrame m = Uniform(20 * 256 + 5, 10, 10);
+  for (int c = 0; c < 10; ++c) m.intensity(9, c) = 100 * 256 + 7;
+  return m;
+}
+
+TEST(VendorHistogramTest, PercentilePositionAndDampedStep) {
+  ControllerOptions o = Opts(ControllerKind::kVendorHistogram, 0.0, 50);
+  o.percent_over_pos = 10.0;
+  o.desired_pos = 45;
+  o.vendor_gain = 0.5;
+  o.vendor_max_step_register = 100;
+  VendorHistogram v(o);
+  // 10 % may lie above x: x = 20. Step = 50 * 0.5 * (45 / 20 - 1) = 31.25 -> 81.25.
+  EXPECT_EQ(v.Update(TwoLevels()), 81);
+  EXPECT_EQ(v.last_position(), 20);
+  // Only 5 % may lie above: x = 100. From 81: step = 81 * 0.5 * (0.45 - 1) = -22.275 -> 58.7.
+  o.percent_over_pos = 5.0;
+  VendorHistogram w(o);
+  w.Reset(81);
+  EXPECT_EQ(w.Update(TwoLevels()), 59);
+  EXPECT_EQ(w.last_position(), 100);
+}
+
+TEST(VendorHistogramTest, StepLimitDeadbandAndClamp) {
+  ControllerOptions o = Opts(ControllerKind::kVendorHistogram, 0.0, 50);
+  o.vendor_max_step_register = 20;
+  VendorHistogram v(o);
+  EXPECT_EQ(v.Update(TwoLevels()), 70);  // the 31.25 step limited to 20
+  // x = 44 is inside the deadband (|44 - 45| <= 2): no change.
+  EXPECT_EQ(v.Update(Uniform(44 * 256)), 70);
+  EXPECT_EQ(v.last_position(), 44);
+  // Intensity 0 everywhere: x = 0 counts as 1, the step is the limit each frame, up to 255.
+  for (int i = 0; i < 20; ++i) (void)v.Update(Uniform(0));
+  EXPECT_EQ(v.Update(Uniform(0)), 255);
+  // Saturated intensity (65532 -> bin 255): down by the limit, then clamped at the minimum.
+  EXPECT_EQ(v.Update(Uniform(65532)), 235);
+  for (int i = 0; i < 20; ++i) (void)v.Update(Uniform(65532));
+  EXPECT_EQ(v.Update(Uniform(65532)), 1);
+}
+
+// Closed loop on a linear plant I = k * c (intensity proportional to integration time), the
+// paper's assumption that successive frames are similar.
+int RunLoop(IntegrationTimeController& c, double k, int start, int frames) {
+  int reg = start;
+  for (int t = 0; t < frames; ++t) reg = c.Update(Uniform(static_cast<float>(k * reg)));
+  return reg;
+}
+
+TEST(ControllerClosedLoopTest, PositionFormKeepsAnOffsetIncrementalFormDoesNot) {
+  // k = 1000 per register, I_A = 16000: the ideal register is 16.
+  ControllerOptions o = Opts(ControllerKind::kMayProportional, 2.5e-4, 40);
+  MayProportional p(o);
+  // Fixed point of c = -V_p (k c - I_A) + c_0: c = (c_0 + V_p I_A) / (1 + V_p k)
+  // = (40 + 4) / 1.25 = 35.2 -> the loop settles at 35 (intensity 35000, not 16000).
+  EXPECT_EQ(RunLoop(p, 1000.0, 40, 50), 35);
+  // c_0 at the ideal register removes the offset, as the notes say.
+  o.bias_register = 16;
+  MayProportional tuned(o);
+  EXPECT_EQ(RunLoop(tuned, 1000.0, 40, 50), 16);
+  // The incremental form converges to the ideal register from any start: loop gain
+  // V_p k = 0.25, error shrinks by 0.75 per frame.
+  MayIncremental inc(Opts(ControllerKind::kMayIncremental, 2.5e-4, 40));
+  EXPECT_EQ(RunLoop(inc, 1000.0, 40, 60), 16);
+  // A loop gain above 2 oscillates (V_p k = 2.5): the clamp bounds it but it never settles.
+  MayIncremental hot(Opts(ControllerKind::kMayIncremental, 2.5e-3, 40));
+  const int a = RunLoop(hot, 1000.0, 40, 60);
+  const int b = hot.Update(Uniform(static_cast<float>(1000.0 * a)));
+  EXPECT_GT(std::abs(a - b), 5);
+}
+
+TEST(ControllerClosedLoopTest, VendorHistogramConvergesWhateverTheGain) {
+  // The multiplicative step is scale-free: for k = 100 and k = 5000 per register the 8-bit
+  // position x = k c / 256 ends within the deadband of desired_pos = 45 (or at a bound).
+  for (double k : {100.0, 1000.0, 5000.0}) {
+    ControllerOptions o = Opts(ControllerKind::kVendorHistogram, 0.0, 40);
+    VendorHistogram v(o);
+    const int reg = RunLoop(v, k, 40, 100);
+    const double x = k * reg / 256.0;
+    // Rounding to whole registers: at k = 5000 one register moves x by 19.5.
+    EXPECT_NEAR(x, 45.0, std::max(3.0, k / 256.0)) << "k " << k << " reg " << reg;
+  }
+}
+
+TEST(FixedTest, AlwaysTheBias) {
+  Fixed f(Opts(ControllerKind::kFixed, 0.5, 77));
+  EXPECT_EQ(f.Update(Uniform(0)), 77);
+  EXPECT_EQ(f.Update(Uniform(65532)), 77);
+  f.Reset(3);
+  EXPECT_EQ(f.Update(Uniform(100)), 77);
+}
+
+TEST(ControllerOptionsTest, RejectsOutOfRangeValues) {
+  const auto expect_bad = [](auto mutate) {
+    ControllerOptions o;
+    mutate(o);
+    try {
+      (void)MakeController(o);
+      ADD_FAILURE() << "expected Error";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    }
+  };
+  expect_bad([](ControllerOptions& o) { o.target_intensity = 0; });
+  expect_bad([](ControllerOptions& o) { o.target_intensity = 70000; });
+  expect_bad([](ControllerOptions& o) { o.target_intensity = std::nan(""); });
+  expect_bad([](ControllerOptions& o) { o.gain_register_per_intensity = -1e-3; });
+  expect_bad([](ControllerOptions& o) {
+    o.gain_register_per_intensity = std::numeric_limits<double>::infinity();
+  });
+  expect_bad([](ControllerOptions& o) { o.min_register = 0; });
+  expect_bad([](ControllerOptions& o) { o.min_register = 100, o.max_register = 50; });
+  expect_bad([](ControllerOptions& o) { o.max_register = 70000; });
+  expect_bad([](ControllerOptions& o) { o.bias_register = 256; });
+  expect_bad([](ControllerOptions& o) { o.roi.rows = -1; });
+  expect_bad([](ControllerOptions& o) { o.percent_over_pos = 100; });
+  expect_bad([](ControllerOptions& o) { o.desired_pos = 0; });
+  expect_bad([](ControllerOptions& o) { o.vendor_gain = 0; });
+  expect_bad([](ControllerOptions& o) { o.vendor_max_step_register = 0; });
+  expect_bad([](ControllerOptions& o) { o.vendor_deadband = -1; });
+  EXPECT_THROW(MayIncremental(Opts(ControllerKind::kMayIncremental, 2.0, 50)), Error);
+}
+
+}  // namespace
+}  // namespace tofcam

@@ -1,0 +1,138 @@
+#include "tofcam/filters/weingarten_cell_filter.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <tuple>
+
+#include "test_scene.h"
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+// n x 1 frame whose rays are all (0, 0, 1): the points are (0, 0, d).
+struct Line {
+  MetricFrame frame;
+  RayTable rays;
+};
+Line MakeLine(const std::vector<float>& d) {
+  const int n = static_cast<int>(d.size());
+  Line l;
+  l.frame.radial_distance_m = Image<float>(n, 1);
+  l.frame.flags = Image<PixelFlags>(n, 1);
+  for (int i = 0; i < n; ++i) l.frame.radial_distance_m[i] = d[i];
+  l.rays = {Image<float>(n, 1, 0.0f), Image<float>(n, 1, 0.0f), Image<float>(n, 1, 1.0f)};
+  return l;
+}
+
+TEST(WeingartenCellFilterTest, HandCountedCells) {
+  // Cells of 0.1 m along z: [1.0, 1.1) holds 4 points, [2.0, 2.1) holds 2, [3.5, 3.6) holds 1.
+  const Line l = MakeLine({1.01f, 1.02f, 2.05f, 1.03f, 3.55f, 1.04f, 2.06f});
+  WeingartenCellOptions o;
+  o.voxel_size_m = 0.1;
+  o.min_points = 3;
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  const bool expected[] = {false, false, true, false, true, false, true};
+  for (int i = 0; i < 7; ++i) {
+    EXPECT_EQ(out[i].Has(Flag::kSparseCell), expected[i]) << i;
+    EXPECT_EQ(out[i].bits() & ~static_cast<std::uint16_t>(Flag::kSparseCell), 0);
+  }
+}
+
+TEST(WeingartenCellFilterTest, RejectedPointsNeitherCountNorGetFlagged) {
+  Line l = MakeLine({1.01f, 1.02f, 1.03f, 1.04f, std::nanf("")});
+  l.frame.flags[3] = Flag::kHighDeltaL;  // leaves 3 usable points in the cell
+  WeingartenCellOptions o;
+  o.min_points = 4;
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  EXPECT_TRUE(out[0].Has(Flag::kSparseCell));
+  EXPECT_TRUE(out[2].Has(Flag::kSparseCell));
+  EXPECT_FALSE(out[3].Has(Flag::kSparseCell));  // rejected: not judged
+  EXPECT_FALSE(out[4].Has(Flag::kSparseCell));  // NaN distance: not judged
+}
+
+TEST(WeingartenCellFilterTest, NegativeCoordinatesUseFloorCells) {
+  // Points at x = -0.05 and x = +0.05 lie in different cells (-1 and 0), not both in cell 0.
+  Line l = MakeLine({0.05f, 0.05f});
+  l.rays.x[0] = -1.0f;
+  l.rays.z[0] = 0.0f;
+  l.rays.x[1] = 1.0f;
+  l.rays.z[1] = 0.0f;
+  WeingartenCellOptions o;
+  o.min_points = 2;
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  EXPECT_TRUE(out[0].Has(Flag::kSparseCell));
+  EXPECT_TRUE(out[1].Has(Flag::kSparseCell));
+}
+
+TEST(WeingartenCellFilterTest, ManyDistinctCellsGrowTheTable) {
+  // 40000 points 1.5 mm apart along z with 1 mm cells: every point alone in its cell, far more
+  // cells than the table's first size.
+  std::vector<float> d(40000);
+  for (std::size_t i = 0; i < d.size(); ++i) d[i] = 0.5f + 0.0015f * static_cast<float>(i);
+  const Line l = MakeLine(d);
+  WeingartenCellOptions o;
+  o.voxel_size_m = 0.001;
+  o.min_points = 1;
+  Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_TRUE(out[i].None()) << i;
+  o.min_points = 2;
+  out = WeingartenCellFilter(l.frame, l.rays, o);
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_TRUE(out[i].Has(Flag::kSparseCell)) << i;
+}
+
+TEST(WeingartenCellFilterTest, MatchesMapReferenceOnScene) {
+  test::Scene s = test::MakeScene();
+  // Sprinkle deterministic outliers so some cells are sparse.
+  for (int i = 0; i < 300; ++i) {
+    const int r = (i * 37) % s.frame.height(), c = (i * 91) % s.frame.width();
+    s.frame.radial_distance_m(r, c) = 0.3f + 0.021f * static_cast<float>(i);
+  }
+  WeingartenCellOptions o;
+  o.voxel_size_m = 0.1;
+  o.min_points = 5;
+  const Image<PixelFlags> out = WeingartenCellFilter(s.frame, s.rays, o);
+  // Reference: std::map over floor(coordinate / voxel) computed in double.
+  auto cell = [&](int r, int c) {
+    const double d = s.frame.radial_distance_m(r, c);
+    auto q = [&](float ray) { return static_cast<long>(std::floor(d * ray / o.voxel_size_m)); };
+    return std::make_tuple(q(s.rays.x(r, c)), q(s.rays.y(r, c)), q(s.rays.z(r, c)));
+  };
+  std::map<std::tuple<long, long, long>, int> count;
+  for (int r = 0; r < s.frame.height(); ++r)
+    for (int c = 0; c < s.frame.width(); ++c) ++count[cell(r, c)];
+  int flagged = 0, disagreements = 0;
+  for (int r = 0; r < s.frame.height(); ++r) {
+    for (int c = 0; c < s.frame.width(); ++c) {
+      const bool want = count[cell(r, c)] < o.min_points;
+      flagged += want ? 1 : 0;
+      disagreements += want != out(r, c).Has(Flag::kSparseCell) ? 1 : 0;
+    }
+  }
+  // The filter computes coordinates in float, the reference in double: a point within float
+  // rounding (~1e-7 m) of a cell boundary may land in the neighbouring cell. Allow a handful.
+  EXPECT_LE(disagreements, 5);
+  EXPECT_GT(flagged, 200);
+}
+
+TEST(WeingartenCellFilterTest, ErrorsAreReported) {
+  const Line l = MakeLine({1.0f});
+  WeingartenCellOptions o;
+  o.voxel_size_m = 0.0;
+  EXPECT_THROW(o.Validate(), Error);
+  o = {};
+  o.min_points = 0;
+  EXPECT_THROW((void)WeingartenCellFilter(l.frame, l.rays, o), Error);
+  RayTable wrong{Image<float>(2, 1), Image<float>(2, 1), Image<float>(2, 1)};
+  try {
+    (void)WeingartenCellFilter(l.frame, wrong, {});
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+}
+
+}  // namespace
+}  // namespace tofcam

@@ -1,0 +1,233 @@
+#include "tofcam/io/calibration_file.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include "tofcam/core/atomic_file.h"
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path TempDir() {
+  return fs::temp_directory_path() / ("tofcam_calfile_" + std::to_string(::getpid()));
+}
+
+fs::path Temp(const std::string& name) {
+  fs::create_directories(TempDir());
+  return TempDir() / name;
+}
+
+// Removes the scratch directory after the last test.
+class ScratchCleanup : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::error_code ignored;
+    fs::remove_all(TempDir(), ignored);
+  }
+};
+[[maybe_unused]] ::testing::Environment* const kCleanup =
+    ::testing::AddGlobalTestEnvironment(new ScratchCleanup);
+
+OffsetCalibration Sample() {
+  OffsetCalibration c;
+  c.camera_model = "SR-2";
+  c.width = 5;
+  c.height = 3;
+  c.modulation_frequency_hz = 20e6;
+  c.integration_time_us = 5100.0;
+  c.integration_time_register = 20;
+  c.created_unix_s = 1763780000;
+  c.wall_distance_m = 2.0;
+  c.wall_normal[0] = 0.1;
+  c.wall_normal[1] = 0.0;
+  c.wall_normal[2] = std::sqrt(0.99);
+  c.frames_averaged = 50;
+  c.offset_m = Image<float>(5, 3);
+  for (int r = 0; r < 3; ++r)
+    for (int col = 0; col < 5; ++col) c.offset_m(r, col) = 0.1f / 3.0f * (r - 1) + 1e-7f * col;
+  c.pixel_flags = Image<PixelFlags>(5, 3);
+  c.pixel_flags(2, 4) = PixelFlags(Flag::kInvalid);
+  c.distance_correction = DistanceCorrection{0.5, 0.05, {0.01f, -0.0123456789f, 0.0f}};
+  return c;
+}
+
+void ExpectSame(const OffsetCalibration& a, const OffsetCalibration& b) {
+  EXPECT_EQ(a.version, b.version);
+  EXPECT_EQ(a.camera_model, b.camera_model);
+  EXPECT_EQ(a.width, b.width);
+  EXPECT_EQ(a.height, b.height);
+  EXPECT_EQ(a.modulation_frequency_hz, b.modulation_frequency_hz);
+  EXPECT_EQ(a.integration_time_us, b.integration_time_us);
+  EXPECT_EQ(a.integration_time_register, b.integration_time_register);
+  EXPECT_EQ(a.created_unix_s, b.created_unix_s);
+  EXPECT_EQ(a.wall_distance_m, b.wall_distance_m);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(a.wall_normal[k], b.wall_normal[k]);
+  EXPECT_EQ(a.frames_averaged, b.frames_averaged);
+  EXPECT_TRUE(a.offset_m == b.offset_m);  // bit-exact floats
+  EXPECT_TRUE(a.pixel_flags == b.pixel_flags);
+  ASSERT_EQ(a.distance_correction.has_value(), b.distance_correction.has_value());
+  if (a.distance_correction) {
+    EXPECT_EQ(a.distance_correction->start_m, b.distance_correction->start_m);
+    EXPECT_EQ(a.distance_correction->step_m, b.distance_correction->step_m);
+    EXPECT_EQ(a.distance_correction->correction_m, b.distance_correction->correction_m);
+  }
+}
+
+TEST(CalibrationFileTest, RoundTripIsExact) {
+  const fs::path p = Temp("round.yaml");
+  const OffsetCalibration c = Sample();
+  SaveCalibration(p, c);
+  ExpectSame(LoadCalibration(p), c);
+  // Without the optional parts.
+  OffsetCalibration plain = Sample();
+  plain.pixel_flags = Image<PixelFlags>();
+  plain.distance_correction.reset();
+  SaveCalibration(p, plain);
+  ExpectSame(LoadCalibration(p), plain);
+  // Written atomically: no temporary file left beside the target.
+  for (const auto& entry : fs::directory_iterator(p.parent_path())) {
+    EXPECT_EQ(entry.path().string().find(".tmp-"), std::string::npos) << entry.path();
+  }
+}
+
+TEST(CalibrationFileTest, FileIsTheDocumentedYaml) {
+  const fs::path p = Temp("doc.yaml");
+  SaveCalibration(p, Sample());
+  const std::string text = ReadFile(p);
+  for (const char* key : {"format: tofcam-calibration", "version: 1", "camera_model: \"SR-2\"",
+                          "width: 5", "height: 3", "modulation_frequency_hz: 20000000",
+                          "uncalibrated_pixels: [[2, 4]]", "distance_correction:"}) {
+    EXPECT_NE(text.find(key), std::string::npos) << key << "\n" << text;
+  }
+}
+
+TEST(CalibrationFileTest, SaveRejectsInvalidCalibration) {
+  OffsetCalibration c = Sample();
+  c.offset_m(0, 0) = NAN;
+  EXPECT_THROW(SaveCalibration(Temp("bad.yaml"), c), Error);
+  EXPECT_FALSE(fs::exists(Temp("bad.yaml")));
+}
+
+TEST(CalibrationFileTest, MissingFileIsNotFound) {
+  try {
+    (void)LoadCalibration(Temp("does-not-exist.yaml"));
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kNotFound);
+  }
+}
+
+// Saves Sample(), replaces `from` by `to` in the text, loads, and returns the kFormat message.
+std::string LoadEdited(const std::string& from, const std::string& to) {
+  const fs::path p = Temp("edited.yaml");
+  SaveCalibration(p, Sample());
+  std::string text = ReadFile(p);
+  const auto at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << "test setup: '" << from << "' not in\n" << text;
+  if (at != std::string::npos) text.replace(at, from.size(), to);
+  WriteFileAtomically(p, text);
+  try {
+    (void)LoadCalibration(p);
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kFormat) << e.what();
+    EXPECT_NE(std::string(e.what()).find("edited.yaml"), std::string::npos) << e.what();
+    return e.what();
+  }
+  return "loaded without error";
+}
+
+void ExpectRejected(const std::string& from, const std::string& to, const std::string& needle) {
+  const std::string message = LoadEdited(from, to);
+  EXPECT_NE(message.find(needle), std::string::npos)
+      << "edit '" << from << "' -> '" << to << "': " << message;
+}
+
+TEST(CalibrationFileTest, RejectsEveryMalformedField) {
+  ExpectRejected("format: tofcam-calibration", "format: something-else", "format is");
+  ExpectRejected("format: tofcam-calibration\n", "", "missing key 'format'");
+  ExpectRejected("version: 1", "version: 2", "unsupported version 2");
+  ExpectRejected("version: 1", "version: one", "not an integer");
+  ExpectRejected("width: 5", "width: 0", "width = 0 is outside");
+  ExpectRejected("width: 5", "width: 4", "offset_m row 0 has 5 entries, expected 4");
+  ExpectRejected("width: 5", "width: 100000", "width = 100000 is outside");
+  ExpectRejected("width: 5\nheight: 3", "width: 16384\nheight: 16384", "exceeds 2^24 pixels");
+  ExpectRejected("height: 3", "height: 4", "offset_m has 3 entries, expected 4");
+  ExpectRejected("height: 3", "height: -3", "outside");
+  ExpectRejected("modulation_frequency_hz: 20000000", "modulation_frequency_hz: 0", "> 0");
+  ExpectRejected("modulation_frequency_hz: 20000000", "modulation_frequency_hz: 30000000x",
+                 "not a number");
+  ExpectRejected("camera_model: \"SR-2\"\n", "", "missing key 'camera_model'");
+  ExpectRejected("frames_averaged: 50", "frames_averaged: 50\nbogus_key: 1",
+                 "unknown key 'bogus_key'");
+  ExpectRejected("wall_normal: [", "wall_normal: [7, ", "wall_normal has 4 entries");
+  ExpectRejected("offset_m:\n  - [", "offset_m:\n  - [.nan, ", "row 0 has 6 entries");
+  const std::string first = "offset_m:\n  - [-0.0333333351,";
+  ExpectRejected(first, "offset_m:\n  - [.nan,", "row 0, col 0 = '.nan' is not");
+  ExpectRejected(first, "offset_m:\n  - [nan,", "row 0, col 0 = 'nan' is not finite");
+  ExpectRejected(first, "offset_m:\n  - [inf,", "not finite");
+  ExpectRejected(first, "offset_m:\n  - [abc,", "not a number");
+  ExpectRejected(first, "offset_m:\n  - [1e999,", "not a number");  // overflows a double
+  ExpectRejected(first, "offset_m:\n  - [3.9,", "beyond ±L/2");
+  ExpectRejected(first, "offset_m:\n  - [[1],", "must be a number");
+  ExpectRejected("uncalibrated_pixels: [[2, 4]]", "uncalibrated_pixels: [[3, 4]]",
+                 "row = 3 is outside [0, 2]");
+  ExpectRejected("uncalibrated_pixels: [[2, 4]]", "uncalibrated_pixels: [[2]]",
+                 "has 1 entries, expected 2");
+  ExpectRejected("step_m: 0.050000000000000003", "step_m: 0", "step_m = 0 must be > 0");
+  ExpectRejected("step_m: 0.050000000000000003", "step_m: 0.05\n  extra: 1", "unknown key 'extra'");
+  ExpectRejected("correction_m: [", "correction_m: [nan, ", "not finite");
+  ExpectRejected("format: tofcam-calibration", "format: [unclosed", "not valid YAML");
+}
+
+TEST(CalibrationFileTest, RejectsNonMappingsAndEmptyFiles) {
+  const fs::path p = Temp("junk.yaml");
+  for (const char* text : {"", "just a string", "- 1\n- 2\n", "\x01\x02\xff"}) {
+    WriteFileAtomically(p, text);
+    try {
+      (void)LoadCalibration(p);
+      ADD_FAILURE() << "loaded '" << text << "'";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::kFormat) << e.what();
+    }
+  }
+}
+
+TEST(CalibrationFileTest, MismatchNamesTheField) {
+  const OffsetCalibration c = Sample();
+  CameraInfo info;
+  info.model = "SR-2";
+  info.intrinsics.width = 5;
+  info.intrinsics.height = 3;
+  EXPECT_NO_THROW(CheckCalibrationMatches(c, info));
+  const auto message = [&](const CameraInfo& i) {
+    try {
+      CheckCalibrationMatches(c, i);
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+      return std::string(e.what());
+    }
+    return std::string("matched");
+  };
+  CameraInfo other = info;
+  other.model = "SR-3000";
+  EXPECT_NE(message(other).find("camera model"), std::string::npos);
+  other = info;
+  other.intrinsics.width = 176;
+  EXPECT_NE(message(other).find("width is 5"), std::string::npos);
+  other = info;
+  other.intrinsics.height = 144;
+  EXPECT_NE(message(other).find("height is 3"), std::string::npos);
+  other = info;
+  other.modulation_frequency_hz = 30e6;
+  EXPECT_NE(message(other).find("modulation frequency"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace tofcam

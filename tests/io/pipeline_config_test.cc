@@ -1,0 +1,267 @@
+#include "tofcam/io/pipeline_config.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Every field of the options that the file carries, compared one by one (a missed field in the
+// writer or the reader shows up here as a difference after the round trip).
+void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
+  EXPECT_EQ(a.metric.remove_distance_offset_register, b.metric.remove_distance_offset_register);
+  EXPECT_EQ(a.calibration_file, b.calibration_file);
+  EXPECT_EQ(a.accuracy_enabled, b.accuracy_enabled);
+  EXPECT_EQ(a.accuracy.scale, b.accuracy.scale);
+  EXPECT_EQ(a.accuracy.intensity_per_amplitude, b.accuracy.intensity_per_amplitude);
+  const FilterSetOptions& fa = a.filters;
+  const FilterSetOptions& fb = b.filters;
+  EXPECT_EQ(fa.range_enabled, fb.range_enabled);
+  EXPECT_EQ(fa.range.min_distance_m, fb.range.min_distance_m);
+  EXPECT_EQ(fa.range.max_distance_m, fb.range.max_distance_m);
+  EXPECT_EQ(fa.amplitude_enabled, fb.amplitude_enabled);
+  EXPECT_EQ(fa.amplitude.min_amplitude, fb.amplitude.min_amplitude);
+  EXPECT_EQ(fa.saturation_enabled, fb.saturation_enabled);
+  EXPECT_EQ(fa.saturation.max_intensity, fb.saturation.max_intensity);
+  EXPECT_EQ(fa.saturation.max_amplitude, fb.saturation.max_amplitude);
+  EXPECT_EQ(fa.saturation.max_peak, fb.saturation.max_peak);
+  EXPECT_EQ(fa.accuracy_enabled, fb.accuracy_enabled);
+  EXPECT_EQ(fa.accuracy.max_delta_l_m, fb.accuracy.max_delta_l_m);
+  EXPECT_EQ(fa.flying_pixel_enabled, fb.flying_pixel_enabled);
+  EXPECT_EQ(fa.flying_pixel.min_amplitude_contrast, fb.flying_pixel.min_amplitude_contrast);
+  EXPECT_EQ(fa.flying_pixel.amplitude_mean_floor, fb.flying_pixel.amplitude_mean_floor);
+  EXPECT_EQ(fa.flying_pixel.min_close_delta_m, fb.flying_pixel.min_close_delta_m);
+  EXPECT_EQ(fa.flying_pixel.min_far_delta_m, fb.flying_pixel.min_far_delta_m);
+  EXPECT_EQ(fa.flying_pixel.min_max_delta_m, fb.flying_pixel.min_max_delta_m);
+  EXPECT_EQ(fa.flying_pixel.min_avg_delta_m, fb.flying_pixel.min_avg_delta_m);
+  EXPECT_EQ(fa.jump_edge_enabled, fb.jump_edge_enabled);
+  EXPECT_EQ(fa.jump_edge.max_angle_deg, fb.jump_edge.max_angle_deg);
+  EXPECT_EQ(fa.weingarten_enabled, fb.weingarten_enabled);
+  EXPECT_EQ(fa.weingarten.voxel_size_m, fb.weingarten.voxel_size_m);
+  EXPECT_EQ(fa.weingarten.min_points, fb.weingarten.min_points);
+  const ControllerOptions& ca = a.controller;
+  const ControllerOptions& cb = b.controller;
+  EXPECT_EQ(a.controller_enabled, b.controller_enabled);
+  EXPECT_EQ(ca.kind, cb.kind);
+  EXPECT_EQ(ca.target_intensity, cb.target_intensity);
+  EXPECT_EQ(ca.gain_register_per_intensity, cb.gain_register_per_intensity);
+  EXPECT_EQ(ca.bias_register, cb.bias_register);
+  EXPECT_EQ(ca.min_register, cb.min_register);
+  EXPECT_EQ(ca.max_register, cb.max_register);
+  EXPECT_EQ(ca.roi.row, cb.roi.row);
+  EXPECT_EQ(ca.roi.col, cb.roi.col);
+  EXPECT_EQ(ca.roi.rows, cb.roi.rows);
+  EXPECT_EQ(ca.roi.cols, cb.roi.cols);
+  EXPECT_EQ(ca.exclude_flags, cb.exclude_flags);
+  EXPECT_EQ(ca.percent_over_pos, cb.percent_over_pos);
+  EXPECT_EQ(ca.desired_pos, cb.desired_pos);
+  EXPECT_EQ(ca.vendor_gain, cb.vendor_gain);
+  EXPECT_EQ(ca.vendor_max_step_register, cb.vendor_max_step_register);
+  EXPECT_EQ(ca.vendor_deadband, cb.vendor_deadband);
+  EXPECT_EQ(a.cloud_enabled, b.cloud_enabled);
+  EXPECT_EQ(a.cloud.nan_mask, b.cloud.nan_mask);
+  EXPECT_EQ(a.color.near_m, b.color.near_m);
+  EXPECT_EQ(a.color.far_m, b.color.far_m);
+  EXPECT_EQ(a.color.out_of_range_black, b.color.out_of_range_black);
+  EXPECT_EQ(a.color.amplitude_shading, b.color.amplitude_shading);
+  EXPECT_EQ(a.color.shading_reference_amplitude, b.color.shading_reference_amplitude);
+  EXPECT_EQ(a.color.shading_min_value, b.color.shading_min_value);
+  EXPECT_EQ(a.color_legend, b.color_legend);
+  EXPECT_EQ(a.stats.bad_error_m, b.stats.bad_error_m);
+}
+
+// Options that differ from the defaults in every field, with values that have no short decimal
+// form (0.1 + 0.2, 1/3) so that a lossy number format would break the round trip.
+PipelineOptions Unusual() {
+  PipelineOptions o;
+  o.metric.remove_distance_offset_register = false;
+  o.calibration_file = "cal \"wall\" \\ 2.yaml";
+  o.accuracy.scale = 1.0 / 3.0;
+  o.accuracy.intensity_per_amplitude = 0.1 + 0.2;
+  o.filters.range_enabled = true;
+  o.filters.range.min_distance_m = 0.25;
+  o.filters.range.max_distance_m = 6.9;
+  o.filters.amplitude_enabled = true;
+  o.filters.amplitude.min_amplitude = 123.5;
+  o.filters.saturation_enabled = false;
+  o.filters.saturation.max_intensity = 60000;
+  o.filters.saturation.max_amplitude = 50000;
+  o.filters.saturation.max_peak = 61000.25;
+  o.filters.accuracy.max_delta_l_m = 0.045;
+  o.filters.flying_pixel_enabled = true;
+  o.filters.flying_pixel.min_amplitude_contrast = 0.07;
+  o.filters.flying_pixel.amplitude_mean_floor = 40;
+  o.filters.flying_pixel.min_close_delta_m = 0.06;
+  o.filters.flying_pixel.min_far_delta_m = 0.04;
+  o.filters.flying_pixel.min_max_delta_m = 0.12;
+  o.filters.flying_pixel.min_avg_delta_m = 0.01;
+  o.filters.jump_edge_enabled = true;
+  o.filters.jump_edge.max_angle_deg = 155;
+  o.filters.weingarten_enabled = true;
+  o.filters.weingarten.voxel_size_m = 0.2;
+  o.filters.weingarten.min_points = 7;
+  o.controller_enabled = false;
+  o.controller.kind = ControllerKind::kVendorHistogram;
+  o.controller.target_intensity = 17000;
+  o.controller.gain_register_per_intensity = 1e-5;
+  o.controller.bias_register = 50;
+  o.controller.min_register = 2;
+  o.controller.max_register = 200;
+  o.controller.roi = {10, 20, 30, 40};
+  o.controller.exclude_flags = (PixelFlags(Flag::kInvalid) | Flag::kSaturated).bits();
+  o.controller.percent_over_pos = 12.5;
+  o.controller.desired_pos = 60;
+  o.controller.vendor_gain = 0.75;
+  o.controller.vendor_max_step_register = 5;
+  o.controller.vendor_deadband = 3;
+  o.cloud_enabled = false;
+  o.cloud.nan_mask = 0;
+  o.color.near_m = 0.5;
+  o.color.far_m = 5.0;
+  o.color.out_of_range_black = true;
+  o.color.amplitude_shading = true;
+  o.color.shading_reference_amplitude = 9000;
+  o.color.shading_min_value = 0.1;
+  o.color_legend = false;
+  o.stats.bad_error_m = 0.03;
+  return o;
+}
+
+TEST(PipelineConfigTest, DefaultsRoundTrip) {
+  const PipelineOptions defaults;
+  const std::string text = PipelineConfigToYaml(defaults);
+  const PipelineOptions back = ParsePipelineConfig(text, "defaults");
+  ExpectSameOptions(defaults, back);
+}
+
+TEST(PipelineConfigTest, EveryFieldRoundTrips) {
+  const PipelineOptions o = Unusual();
+  const PipelineOptions back = ParsePipelineConfig(PipelineConfigToYaml(o), "unusual");
+  ExpectSameOptions(o, back);
+  // Guard against a vacuous comparison: the unusual options really differ from the defaults.
+  EXPECT_NE(back.accuracy.scale, PipelineOptions{}.accuracy.scale);
+  EXPECT_EQ(back.controller.kind, ControllerKind::kVendorHistogram);
+}
+
+TEST(PipelineConfigTest, PrintedDefaultsNameEveryStage) {
+  const std::string text = PipelineConfigToYaml(PipelineOptions{});
+  for (const char* key :
+       {"metric_conversion:", "calibration:", "accuracy:", "filters:", "controller:",
+        "point_cloud:", "false_color:", "stats:", "kind: may-proportional", "max_delta_l_m: 0.07",
+        "exclude_flags: [invalid]"}) {
+    EXPECT_NE(text.find(key), std::string::npos) << key;
+  }
+}
+
+TEST(PipelineConfigTest, MissingKeysKeepDefaults) {
+  const PipelineOptions o = ParsePipelineConfig(
+      "filters:\n  accuracy:\n    max_delta_l_m: 0.1\ncontroller:\n  kind: may-incremental\n",
+      "partial");
+  EXPECT_EQ(o.filters.accuracy.max_delta_l_m, 0.1);
+  EXPECT_EQ(o.controller.kind, ControllerKind::kMayIncremental);
+  EXPECT_EQ(o.controller.target_intensity, ControllerOptions{}.target_intensity);
+  EXPECT_TRUE(o.filters.saturation_enabled);
+  const PipelineOptions empty = ParsePipelineConfig("", "empty");
+  EXPECT_TRUE(empty.accuracy_enabled);
+}
+
+// Expects Error(code) whose message contains every string of `parts`.
+void ExpectError(const std::string& yaml, ErrorCode code,
+                 std::initializer_list<const char*> parts) {
+  try {
+    (void)ParsePipelineConfig(yaml, "conf.yaml");
+    FAIL() << "no error for:\n" << yaml;
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), code) << e.what();
+    for (const char* p : parts) {
+      EXPECT_NE(std::string(e.what()).find(p), std::string::npos)
+          << "'" << p << "' not in: " << e.what();
+    }
+  }
+}
+
+TEST(PipelineConfigTest, UnknownKeysNameFileLineAndKey) {
+  ExpectError("filters:\n  accuracy:\n    max_delta_lm: 0.1\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "filters.accuracy.max_delta_lm", "max_delta_l_m"});
+  ExpectError("accuracy:\n  enabled: true\nfilterz: {}\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "'filterz'"});
+}
+
+TEST(PipelineConfigTest, WrongTypesNameFileLineAndKey) {
+  ExpectError("accuracy:\n  scale: big\n", ErrorCode::kFormat,
+              {"conf.yaml:2:", "accuracy.scale", "a number", "'big'"});
+  ExpectError("filters:\n  weingarten:\n    min_points: 2.5\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "filters.weingarten.min_points", "an integer"});
+  ExpectError("accuracy:\n  enabled: maybe\n", ErrorCode::kFormat,
+              {"conf.yaml:2:", "accuracy.enabled", "true or false"});
+  ExpectError("controller:\n  kind: pid\n", ErrorCode::kFormat,
+              {"conf.yaml:2:", "controller.kind", "pid"});
+  ExpectError("controller:\n  exclude_flags: [invalid, purple]\n", ErrorCode::kFormat,
+              {"conf.yaml:2:", "controller.exclude_flags", "purple"});
+  ExpectError("controller:\n  exclude_flags: invalid\n", ErrorCode::kFormat,
+              {"conf.yaml:2:", "a list of flag names"});
+  ExpectError("filters: 3\n", ErrorCode::kFormat, {"conf.yaml:1:", "'filters' must be a mapping"});
+  ExpectError("- 1\n- 2\n", ErrorCode::kFormat, {"conf.yaml:1:", "must be a mapping"});
+  ExpectError("filters: {accuracy: [\n", ErrorCode::kFormat, {"conf.yaml", "not YAML"});
+}
+
+TEST(PipelineConfigTest, OutOfRangeValuesNameTheField) {
+  ExpectError("filters:\n  accuracy:\n    max_delta_l_m: -1\n", ErrorCode::kInvalidArgument,
+              {"conf.yaml", "filters.accuracy", "max_delta_l_m"});
+  ExpectError("controller:\n  target_intensity: .nan\n", ErrorCode::kInvalidArgument,
+              {"conf.yaml", "controller"});
+  // The accuracy filter reads ΔL, so it cannot run with ΔL off.
+  ExpectError("accuracy:\n  enabled: false\n", ErrorCode::kInvalidArgument,
+              {"conf.yaml", "accuracy.enabled"});
+}
+
+class PipelineConfigFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("tofcam_pipeline_config_" + std::to_string(::getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+TEST_F(PipelineConfigFileTest, LoadsAFileAndResolvesTheCalibrationBesideIt) {
+  const fs::path path = dir_ / "run.yaml";
+  std::ofstream(path) << "calibration:\n  file: cal.yaml\n";
+  const PipelineOptions o = LoadPipelineConfig(path);
+  EXPECT_EQ(fs::path(o.calibration_file), dir_ / "cal.yaml");
+  std::ofstream(path) << "calibration:\n  file: /abs/cal.yaml\n";
+  EXPECT_EQ(LoadPipelineConfig(path).calibration_file, "/abs/cal.yaml");
+}
+
+TEST_F(PipelineConfigFileTest, MissingFileIsNotFound) {
+  try {
+    (void)LoadPipelineConfig(dir_ / "nope.yaml");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kNotFound);
+    EXPECT_NE(std::string(e.what()).find("nope.yaml"), std::string::npos);
+  }
+}
+
+TEST_F(PipelineConfigFileTest, MissingCalibrationFileIsNotFound) {
+  PipelineOptions o;
+  o.calibration_file = (dir_ / "missing-cal.yaml").string();
+  EXPECT_THROW(LoadPipelineCalibration(o, CameraInfo{}), Error);
+  try {
+    LoadPipelineCalibration(o, CameraInfo{});
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kNotFound);
+  }
+}
+
+}  // namespace
+}  // namespace tofcam

@@ -1,0 +1,470 @@
+#include "tofcam/pipeline/pipeline.h"
+
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+#include "tofcam/io/pipeline_config.h"
+#include "tofcam/sim/simulated_camera.h"
+
+namespace tofcam {
+namespace {
+
+namespace fs = std::filesystem;
+
+// --- Hand-made frames: eq. 1 through the whole pipeline ---------------------------------------
+
+CameraInfo TinyCamera() {
+  CameraInfo info;
+  info.intrinsics.width = 2;
+  info.intrinsics.height = 1;
+  info.intrinsics.cx_px = 0.5;
+  info.intrinsics.cy_px = 0.0;
+  return info;
+}
+
+Frame TinyFrame(std::uint16_t d0, std::uint16_t d1) {
+  Frame f;
+  f.distance = Image<std::uint16_t>(2, 1);
+  f.amplitude = Image<std::uint16_t>(2, 1, 20000);
+  f.intensity = Image<std::uint16_t>(2, 1, 30000);
+  f.distance[0] = d0;
+  f.distance[1] = d1;
+  f.info.modulation_frequency_hz = 20e6;
+  f.info.integration_time_register = 40;
+  f.info.integration_time_us = 40 * 255.0;
+  f.info.camera_model = "SR-2";
+  return f;
+}
+
+OffsetCalibration TinyCalibration(float o0, float o1) {
+  OffsetCalibration c;
+  c.camera_model = "SR-2";
+  c.width = 2;
+  c.height = 1;
+  c.modulation_frequency_hz = 20e6;
+  c.integration_time_us = 40 * 255.0;
+  c.integration_time_register = 40;
+  c.wall_distance_m = 1.0;
+  c.frames_averaged = 1;
+  c.offset_m = Image<float>(2, 1);
+  c.offset_m[0] = o0;
+  c.offset_m[1] = o1;
+  return c;
+}
+
+TEST(PipelineTest, AppliesEquationOneIncludingTheWrap) {
+  PipelineOptions options;
+  options.calibration = TinyCalibration(0.10f, 0.05f);
+  options.controller_enabled = false;
+  Pipeline pipeline(options, TinyCamera());
+  // Pixel 0: m = 20000 L / 65536, l = m - 0.10. Pixel 1: m = 100 L / 65536 = 11.4 mm < o, so
+  // l = (m - o + L) mod L = m - o + L wraps to just below L.
+  const PipelineResult r = pipeline.Process(TinyFrame(20000, 100));
+  const double range = UnambiguousRangeM(20e6);
+  EXPECT_NEAR(r.frame.radial_distance_m[0], 20000 * range / 65536 - 0.10, 2e-6);
+  EXPECT_NEAR(r.frame.radial_distance_m[1], 100 * range / 65536 - 0.05 + range, 2e-6);
+  // ΔL by eq. 2 (scale 1): L / sqrt(8) * sqrt(30000) / (2 * 20000).
+  const double delta_l = range / std::sqrt(8.0) * std::sqrt(30000.0) / 40000.0;
+  EXPECT_NEAR(r.frame.delta_l_m[0], delta_l, 1e-6 * delta_l);
+  EXPECT_TRUE(r.frame.flags[0].Valid());
+  // Controller off: the register stays the frame's.
+  EXPECT_EQ(r.next_integration_register, 40);
+  // The cloud is radial distance times the unit ray; pixel 0 is left of the principal point.
+  ASSERT_EQ(r.cloud.size(), 2u);
+  const double x = r.cloud.x[0], y = r.cloud.y[0], z = r.cloud.z[0];
+  EXPECT_NEAR(std::sqrt(x * x + y * y + z * z), r.frame.radial_distance_m[0], 1e-5);
+  EXPECT_LT(x, 0.0);
+}
+
+TEST(PipelineTest, AccuracyThresholdFlagsExactlyThePixelsAboveIt) {
+  PipelineOptions options;
+  options.controller_enabled = false;
+  const double range = UnambiguousRangeM(20e6);
+  // Pixel 0: A = 20000 (ΔL 0.0115 m), pixel 1: A = 2000 (ΔL 0.115 m); threshold 0.07 m.
+  Frame f = TinyFrame(10000, 10000);
+  f.amplitude[1] = 2000;
+  Pipeline pipeline(options, TinyCamera());
+  const PipelineResult r = pipeline.Process(f);
+  ASSERT_GT(range / std::sqrt(8.0) * std::sqrt(30000.0) / 4000.0, 0.07);
+  EXPECT_TRUE(r.frame.flags[0].Valid());
+  EXPECT_TRUE(r.frame.flags[1].Has(Flag::kHighDeltaL));
+  EXPECT_TRUE(r.filter_flags[1].Has(Flag::kHighDeltaL));
+  EXPECT_TRUE(r.input_flags[1].Valid());  // the raw view does not know the filter
+  EXPECT_EQ(r.stats.kept_pixels, 1);
+  // Rejected points have no position in the cloud but keep their flags.
+  EXPECT_TRUE(std::isnan(r.cloud.x[1]));
+  EXPECT_TRUE(r.cloud.flags[1].Has(Flag::kHighDeltaL));
+  // Raw view: both pixels coloured; filtered: the rejected one black.
+  const Image<Rgb8> raw = pipeline.RenderRaw(r);
+  const Image<Rgb8> filtered = pipeline.RenderFiltered(r);
+  EXPECT_NE(raw(0, 1), (Rgb8{0, 0, 0}));
+  EXPECT_EQ(filtered(0, 1), (Rgb8{0, 0, 0}));
+  EXPECT_EQ(raw(0, 0), filtered(0, 0));
+}
+
+TEST(PipelineTest, RejectsMismatchesAndBadOptions) {
+  PipelineOptions options;
+  OffsetCalibration wrong = TinyCalibration(0, 0);
+  wrong.width = 3;
+  wrong.offset_m = Image<float>(3, 1);
+  options.calibration = wrong;
+  try {
+    Pipeline p(options, TinyCamera());
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+    EXPECT_NE(std::string(e.what()).find("3x1"), std::string::npos) << e.what();
+  }
+  options.calibration = TinyCalibration(0, 0);
+  options.calibration->camera_model = "SR-4000";
+  EXPECT_THROW(Pipeline(options, TinyCamera()), Error);
+
+  PipelineOptions unloaded;
+  unloaded.calibration_file = "cal.yaml";
+  try {
+    Pipeline p(unloaded, TinyCamera());
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("cal.yaml"), std::string::npos);
+  }
+
+  PipelineOptions bad;
+  bad.filters.accuracy.max_delta_l_m = -1;
+  try {
+    Pipeline p(bad, TinyCamera());
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("filters.accuracy"), std::string::npos) << e.what();
+  }
+
+  PipelineOptions disjoint;
+  disjoint.controller.min_register = 300;
+  disjoint.controller.max_register = 400;
+  disjoint.controller.bias_register = 300;
+  EXPECT_THROW(Pipeline(disjoint, TinyCamera()), Error);
+
+  Pipeline pipeline(PipelineOptions{}, TinyCamera());
+  Frame big = TinyFrame(1, 1);
+  big.distance = Image<std::uint16_t>(3, 1);
+  big.amplitude = Image<std::uint16_t>(3, 1, 1);
+  big.intensity = Image<std::uint16_t>(3, 1, 1);
+  try {
+    (void)pipeline.Process(big);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+}
+
+TEST(PipelineTest, ControllerBoundsAreIntersectedWithTheCamera) {
+  PipelineOptions options;
+  options.controller.max_register = 1000;
+  options.controller.bias_register = 900;
+  CameraInfo camera = TinyCamera();  // SR-2 registers 1..255
+  Pipeline pipeline(options, camera);
+  EXPECT_EQ(pipeline.options().controller.max_register, 255);
+  EXPECT_EQ(pipeline.InitialIntegrationRegister(), 255);
+}
+
+// --- Simulated frames against ground truth ----------------------------------------------------
+
+sim::SimulatorOptions TestSimulator(std::uint64_t seed) {
+  sim::SimulatorOptions o;
+  o.seed = seed;
+  return o;
+}
+
+// The paper's P-controller, frame by frame: frame t's register is what the pipeline chose at
+// t - 1, and that choice is the printed law evaluated on an independent mean of the raw
+// intensity registers (pixels with amplitude register 0 are kInvalid and do not count).
+TEST(PipelineSimTest, ControllerOutputOfFrameTIsTheRegisterOfFrameTPlusOne) {
+  sim::SimulatedCamera camera(sim::LoadBuiltinScene("pavilion"), sim::ResolveCameraModel("sr2"),
+                              TestSimulator(3));
+  PipelineOptions options;  // MayProportional with the default I_A, V_p, c_0
+  Pipeline pipeline(options, camera.Info());
+  const ControllerOptions& c = pipeline.options().controller;
+  camera.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
+  PipelineResult result;
+  int expected_register = pipeline.InitialIntegrationRegister();
+  std::vector<int> registers;
+  for (int t = 0; t < 6; ++t) {
+    const std::optional<Frame> frame = camera.Grab();
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(frame->info.integration_time_register, expected_register) << "frame " << t;
+    registers.push_back(frame->info.integration_time_register);
+    pipeline.Process(*frame, result);
+
+    double sum = 0.0;
+    int count = 0;
+    for (std::size_t i = 0; i < frame->intensity.size(); ++i) {
+      if (frame->amplitude[i] == 0) continue;
+      sum += frame->intensity[i];
+      ++count;
+    }
+    ASSERT_GT(count, 0);
+    const double mean = sum / count;
+    const double law =
+        -c.gain_register_per_intensity * (mean - c.target_intensity) + c.bias_register;
+    const int expected = static_cast<int>(std::lround(
+        std::clamp(law, static_cast<double>(c.min_register), static_cast<double>(c.max_register))));
+    EXPECT_EQ(result.next_integration_register, expected) << "frame " << t;
+    EXPECT_NEAR(result.stats.mean_intensity, mean, 1e-6 * mean);
+    camera.SetIntegrationTimeRegister(result.next_integration_register);
+    expected_register = result.next_integration_register;
+  }
+  // The register really moved: the test exercised the feedback, not a constant.
+  EXPECT_NE(*std::min_element(registers.begin(), registers.end()),
+            *std::max_element(registers.begin(), registers.end()));
+}
+
+// Paper figs. 8 and 9: a hand close to the lens scatters light over the whole image; the
+// accuracy threshold removes those pixels. The simulator marks them with the truth cause
+// kScattering; pixels with no truth cause and an error below 5 cm are "good". The exposure is
+// fixed at register 20, where the hand does not saturate (at the default I_A = 16000 a
+// controller drives the hand into saturation, and clipped pixels are the saturation filter's
+// business, not this one's).
+TEST(PipelineSimTest, AccuracyFilterRemovesScatteringAndKeepsGoodPixels) {
+  sim::SimulatedCamera camera(sim::LoadBuiltinScene("hand"), sim::ResolveCameraModel("sr2"),
+                              TestSimulator(5));
+  PipelineOptions options;
+  options.controller.kind = ControllerKind::kFixed;
+  options.controller.bias_register = 20;
+  Pipeline pipeline(options, camera.Info());
+  camera.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
+  PipelineResult result;
+  long scattering = 0, scattering_removed = 0, good = 0, good_kept = 0;
+  for (int t = 0; t < 3; ++t) {
+    const std::optional<Frame> frame = camera.Grab();
+    ASSERT_TRUE(frame && frame->truth);
+    pipeline.Process(*frame, result);
+    EXPECT_EQ(result.next_integration_register, 20);
+    const GroundTruth& truth = *result.frame.truth;
+    for (std::size_t i = 0; i < truth.causes.size(); ++i) {
+      const bool kept = result.frame.flags[i].Valid();
+      const float error = result.frame.radial_distance_m[i] - truth.radial_distance_m[i];
+      if (truth.causes[i].Has(Flag::kScattering)) {
+        ++scattering;
+        scattering_removed += kept ? 0 : 1;
+      } else if (!truth.causes[i].Any(kTruthMask) && std::abs(error) < 0.05f) {
+        ++good;
+        good_kept += kept ? 1 : 0;
+      }
+    }
+  }
+  ASSERT_GT(scattering, 3000) << "the hand must scatter over much of the image for this test to "
+                                 "mean anything";
+  ASSERT_GT(good, 3000);
+  const double removed = static_cast<double>(scattering_removed) / scattering;
+  const double kept = static_cast<double>(good_kept) / good;
+  std::printf("scattering pixels removed %.3f (%ld), good pixels kept %.3f (%ld)\n", removed,
+              scattering, kept, good);
+  // "Most" in both directions, as the paper claims for figs. 8 and 9. Scattering: 0.9 rather
+  // than the measured ~1.0 so a change of seed or simulator detail does not break it, while a
+  // filter that keeps scattered pixels by the hundred still fails. Good pixels: "most" taken
+  // literally (> half; ~0.6 measured): the threshold is conservative by design, and good pixels
+  // on the dim floor have ΔL above 7 cm although their error happens to be below 5 cm.
+  EXPECT_GT(removed, 0.9);
+  EXPECT_GT(kept, 0.5);
+  // The frame statistics see the same frame: with truth, something bad was removed.
+  EXPECT_TRUE(result.stats.has_truth);
+  EXPECT_GT(result.stats.bad_removed, 0);
+}
+
+// --- tofcam run as a subprocess ---------------------------------------------------------------
+
+#ifdef TOFCAM_CLI_PATH
+
+class RunCommandTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("tofcam_run_test_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // Runs the CLI with `args`; returns its exit status, stdout in `output`.
+  int Run(const std::string& args, std::string* output = nullptr) {
+    const fs::path out_file = dir_ / "stdout.txt";
+    const std::string command = std::string(TOFCAM_CLI_PATH) + " " + args + " >" +
+                                out_file.string() + " 2>" + (dir_ / "stderr.txt").string();
+    const int status = std::system(command.c_str());
+    if (output != nullptr) {
+      std::ifstream in(out_file);
+      std::stringstream text;
+      text << in.rdbuf();
+      *output = text.str();
+    }
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  std::string Stderr() const {
+    std::ifstream in(dir_ / "stderr.txt");
+    std::stringstream text;
+    text << in.rdbuf();
+    return text.str();
+  }
+  fs::path dir_;
+};
+
+std::vector<std::map<std::string, std::string>> ReadCsv(const fs::path& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::vector<std::string> header;
+  std::vector<std::map<std::string, std::string>> rows;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    if (header.empty()) {
+      header = cells;
+      continue;
+    }
+    EXPECT_EQ(cells.size(), header.size()) << line;
+    std::map<std::string, std::string> row;
+    for (std::size_t i = 0; i < cells.size() && i < header.size(); ++i) row[header[i]] = cells[i];
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+TEST_F(RunCommandTest, RunsFramesAndSummaryAgreesWithTheCsv) {
+  const fs::path out = dir_ / "run";
+  ASSERT_EQ(Run("run --camera sim:hand --frames 4 --seed 2 --png-every 2 --ply-every 3 --out " +
+                out.string()),
+            0)
+      << Stderr();
+  EXPECT_NE(Stderr().find("run: frame 4/4"), std::string::npos) << Stderr();
+  const auto rows = ReadCsv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), 4u);
+  double valid_sum = 0.0;
+  long bad = 0, bad_removed = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    EXPECT_EQ(std::stol(rows[i].at("frame")), static_cast<long>(i));
+    valid_sum += std::stod(rows[i].at("valid_fraction"));
+    bad += std::stol(rows[i].at("bad_pixels"));
+    bad_removed += std::stol(rows[i].at("bad_removed"));
+    // Frame t's controller output is frame t + 1's register.
+    if (i + 1 < rows.size()) {
+      EXPECT_EQ(rows[i].at("next_register"), rows[i + 1].at("integration_register"));
+    }
+  }
+  std::ifstream in(out / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(in);
+  EXPECT_EQ(summary.at("frames").get<int>(), 4);
+  EXPECT_NEAR(summary.at("mean_valid_fraction").get<double>(), valid_sum / 4, 1e-6);
+  EXPECT_EQ(summary.at("bad_pixels").get<long>(), bad);
+  EXPECT_NEAR(summary.at("bad_removed_fraction").get<double>(),
+              static_cast<double>(bad_removed) / bad, 1e-9);
+  EXPECT_TRUE(summary.at("has_truth").get<bool>());
+  EXPECT_GT(summary.at("rmse_m").get<double>(), 0.0);
+  EXPECT_GT(summary.at("mean_frames_per_s").get<double>(), 0.0);
+  EXPECT_EQ(summary.at("controller").get<std::string>(), "may-proportional");
+  EXPECT_TRUE(fs::exists(out / "frame_000000_raw.png"));
+  EXPECT_TRUE(fs::exists(out / "frame_000002_filtered.png"));
+  EXPECT_FALSE(fs::exists(out / "frame_000001_raw.png"));
+  EXPECT_TRUE(fs::exists(out / "frame_000000.ply"));
+  EXPECT_TRUE(fs::exists(out / "frame_000003.ply"));
+}
+
+TEST_F(RunCommandTest, CtrlCFinishesTheFrameWritesOutputsAndExitsZero) {
+  const fs::path out = dir_ / "interrupted";
+  const std::string out_arg = out.string();
+  const std::string stderr_path = (dir_ / "stderr.txt").string();
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int fd = ::open(stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (fd >= 0) {
+      ::dup2(fd, STDERR_FILENO);
+      ::dup2(fd, STDOUT_FILENO);
+    }
+    // Child: a run far longer than the test, throttled to 30 frames/s.
+    ::execl(TOFCAM_CLI_PATH, TOFCAM_CLI_PATH, "run", "--camera", "sim:hand", "--frames", "1000000",
+            "--real-time", "--out", out_arg.c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  // Wait (without a time limit that could fail on a slow machine) until a few rows are on disk.
+  const auto rows_on_disk = [&] {
+    std::ifstream in(out / "frames.csv");
+    return static_cast<int>(
+        std::count(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>(), '\n'));
+  };
+  int status = 0;
+  while (rows_on_disk() < 4) {
+    // A child that died early would leave this loop waiting forever.
+    ASSERT_EQ(::waitpid(pid, &status, WNOHANG), 0) << "tofcam run exited early: " << Stderr();
+    ::usleep(20000);
+  }
+  ASSERT_EQ(::kill(pid, SIGINT), 0);
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  std::ifstream in(out / "summary.json");
+  const nlohmann::json summary = nlohmann::json::parse(in);
+  EXPECT_TRUE(summary.at("interrupted").get<bool>());
+  const auto rows = ReadCsv(out / "frames.csv");
+  EXPECT_EQ(summary.at("frames").get<std::size_t>(), rows.size());
+  EXPECT_GE(rows.size(), 3u);
+  EXPECT_LT(rows.size(), 1000000u);
+}
+
+TEST_F(RunCommandTest, PrintConfigIsALoadableConfig) {
+  std::string text;
+  ASSERT_EQ(Run("run --print-config --controller vendor-histogram", &text), 0) << Stderr();
+  const PipelineOptions o = ParsePipelineConfig(text, "printed");
+  EXPECT_EQ(o.controller.kind, ControllerKind::kVendorHistogram);
+  // The printed file is accepted back by --config.
+  const fs::path config = dir_ / "config.yaml";
+  std::ofstream(config) << text;
+  std::string again;
+  ASSERT_EQ(Run("run --print-config --config " + config.string(), &again), 0) << Stderr();
+  EXPECT_EQ(again, text);
+}
+
+TEST_F(RunCommandTest, BadOptionsFailWithClearErrors) {
+  const int invalid = ExitStatus(ErrorCode::kInvalidArgument);
+  EXPECT_EQ(Run("run --camera sim:hand --frames 0 --out " + (dir_ / "a").string()), invalid);
+  EXPECT_NE(Stderr().find("--frames 0"), std::string::npos) << Stderr();
+  EXPECT_EQ(Run("run --camera nosuch:thing --frames 1 --out " + (dir_ / "b").string()), invalid);
+  EXPECT_NE(Stderr().find("nosuch:thing"), std::string::npos) << Stderr();
+  // --out below a regular file cannot be created.
+  std::ofstream(dir_ / "file") << "x";
+  EXPECT_EQ(Run("run --camera sim:hand --frames 1 --out " + (dir_ / "file" / "sub").string()),
+            ExitStatus(ErrorCode::kIo));
+  EXPECT_NE(Stderr().find("--out"), std::string::npos) << Stderr();
+  EXPECT_EQ(Run("run --camera sim:hand --frames 1 --controller pid --out " + (dir_ / "c").string()),
+            invalid);
+  const fs::path config = dir_ / "bad.yaml";
+  std::ofstream(config) << "filters:\n  acuracy: {}\n";
+  EXPECT_EQ(Run("run --print-config --config " + config.string()), ExitStatus(ErrorCode::kFormat));
+  EXPECT_NE(Stderr().find("bad.yaml:2"), std::string::npos) << Stderr();
+  EXPECT_EQ(Run("run --camera sim:hand --frames 1 --calibration " + (dir_ / "none.yaml").string() +
+                " --out " + (dir_ / "d").string()),
+            ExitStatus(ErrorCode::kNotFound));
+}
+
+#endif  // TOFCAM_CLI_PATH
+
+}  // namespace
+}  // namespace tofcam
