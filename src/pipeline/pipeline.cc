@@ -87,16 +87,23 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
   ControllerOptions& c = options_.controller;
   const int lo = std::max({c.min_register, camera_.min_integration_register, 1});
   const int hi = std::min(c.max_register, camera_.max_integration_register);
-  if (lo > hi) {
+  const bool camera_has_register = camera_.max_integration_register >= 1;
+  if (!camera_has_register) {
+    // Recordings and imported real-camera files have no integration time to set: nothing to
+    // control, so the loop stays open instead of refusing the source.
+    options_.controller_enabled = false;
+  } else if (lo > hi) {
     throw Error(ErrorCode::kInvalidArgument,
                 "controller registers [" + std::to_string(c.min_register) + ", " +
                     std::to_string(c.max_register) + "] and the camera's [" +
                     std::to_string(camera_.min_integration_register) + ", " +
                     std::to_string(camera_.max_integration_register) + "] do not overlap");
   }
-  c.min_register = lo;
-  c.max_register = hi;
-  c.bias_register = std::clamp(c.bias_register, lo, hi);
+  if (camera_has_register) {
+    c.min_register = lo;
+    c.max_register = hi;
+    c.bias_register = std::clamp(c.bias_register, lo, hi);
+  }
   if (options_.controller_enabled) controller_ = MakeController(c);
 
   options_.stats.intensity_roi = c.roi;
@@ -131,7 +138,7 @@ void Pipeline::Process(const Frame& frame, PipelineResult& result) {
       controller_ ? controller_->Update(m) : m.info.integration_time_register;
 
   if (options_.cloud_enabled) {
-    result.cloud = MakePointCloud(m, rays_, options_.cloud);
+    MakePointCloudInto(m, rays_, result.cloud, options_.cloud);
   } else {
     result.cloud = PointCloud();
   }

@@ -54,6 +54,21 @@ Frame TinyFrame(std::uint16_t d0, std::uint16_t d1) {
   return f;
 }
 
+TEST(PipelineTest, SourceWithoutIntegrationRegisterRunsOpenLoop) {
+  // Recordings and imported files have no register to set (range [0, 0]): the pipeline must
+  // accept them and pass the frame's own register through instead of refusing the source.
+  CameraInfo info = TinyCamera();
+  info.min_integration_register = 0;
+  info.max_integration_register = 0;
+  Pipeline pipeline(PipelineOptions{}, info);
+  const PipelineResult r = pipeline.Process(TinyFrame(1000, 2000));
+  EXPECT_EQ(r.next_integration_register, 40);
+  // A camera whose range really conflicts with the controller's bounds is still an error.
+  info.min_integration_register = 300;
+  info.max_integration_register = 400;
+  EXPECT_THROW(Pipeline(PipelineOptions{}, info), Error);
+}
+
 OffsetCalibration TinyCalibration(float o0, float o1) {
   OffsetCalibration c;
   c.camera_model = "SR-2";
