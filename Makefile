@@ -8,7 +8,7 @@ TOFCAM      := $(BUILD)/apps/tofcam/tofcam
 MAKEFLAGS   += --no-print-directory
 
 .PHONY: all deps configure build demo test test-sanitize bench format format-check tidy clean \
-        fuzz kill-test
+        fuzz kill-test bench-peers
 
 all: build
 
@@ -80,3 +80,25 @@ fuzz: deps
 # Crash safety: kill a real recorder with SIGKILL mid-run and read the file back (also in ctest).
 kill-test: build
 	@scripts/kill_recorder_test.sh $(TOFCAM) .
+
+# Peer comparison (issue 7, not part of CI): Open3D's statistical / radius outlier removal beside
+# tofcam's filters on the same simulated frames, judged against the simulator's ground truth.
+PEERS_DIR ?= $(BUILD)/bench-peers
+bench-peers: build
+	@/usr/bin/python3 -c "import open3d" 2>/dev/null || \
+	  (apt-get update && apt-get install -y --no-install-recommends python3-open3d)
+	@$(TOFCAM) bench --frames 8 --no-simulator --no-recording --threads 1 \
+	  --export-peers $(PEERS_DIR) > $(PEERS_DIR).txt
+	@OMP_NUM_THREADS=1 /usr/bin/python3 bench/peers/peer_outlier_removal.py $(PEERS_DIR) \
+	  --json $(PEERS_DIR)/peers.json
+
+# The paper's experiments against ground truth (issue 5): CSVs and false-colour PNGs in
+# out/experiments, plots and the generated docs/results.md (committed).
+.PHONY: experiments
+experiments: build
+	$(TOFCAM) experiment all --out out/experiments --image-prefix results/
+	@mkdir -p docs/results
+	/usr/bin/python3 scripts/plot_experiments.py out/experiments docs/results
+	@cp out/experiments/*.png docs/results/
+	@cp out/experiments/results.md docs/results.md
+	@echo "docs/results.md and docs/results/*.png regenerated"

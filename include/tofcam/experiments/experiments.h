@@ -33,7 +33,7 @@ struct ExperimentOptions {
 
 /// A table; cells are already formatted. Written as `<file>.csv`.
 struct Table {
-  std::string file;                ///< CSV base name, e.g. "fig3_sweep".
+  std::string file;  ///< CSV base name, e.g. "fig3_sweep".
   std::vector<std::string> columns;
   std::vector<std::vector<std::string>> rows;
   bool in_markdown = false;  ///< Also printed in results.md (keep such tables short).
