@@ -20,6 +20,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -48,9 +49,9 @@ using nlohmann::json;
 
 struct BenchOptions {
   bool json_output = false;
-  int frames = 8;            // simulated frames per resolution, cycled through by every stage
-  int threads = 0;           // 0 = both 1 and 2
-  double min_time_s = 0.25;  // per figure (5 batches)
+  int frames = 8;                // simulated frames per resolution, cycled through by every stage
+  int threads = 0;               // 0 = both 1 and 2
+  double min_time_s = 0.25;      // per figure (5 batches)
   std::string export_peers_dir;  // write clouds + tofcam filter results for bench/peers
   bool skip_simulator = false;
   bool skip_recording = false;
@@ -95,6 +96,9 @@ struct Input {
   OffsetCalibration calibration;
   std::vector<Frame> frames;
   std::vector<MetricFrame> ready;  // converted, calibrated, ΔL filled: input of later stages
+  // The same with eq. 1 only: the table above is made up (its cost is real, its values are not
+  // the simulator's wiggling), so the peer comparison's ground-truth counts use these frames.
+  std::vector<MetricFrame> peer_ready;
   [[nodiscard]] std::int64_t pixels() const { return std::int64_t{width} * height; }
 };
 
@@ -125,16 +129,21 @@ Input MakeInput(int width, int height, int frames) {
   for (int k = 0; k < 150; ++k) {
     g.correction_m.push_back(static_cast<float>(0.03 * std::sin(k * 0.05 * 4 * kPi / 7.5)));
   }
+  OffsetCalibration eq1_only = c;
   c.distance_correction = g;
   c.Validate();
   for (int i = 0; i < frames; ++i) {
     std::optional<Frame> f = cam.Grab();
     if (!f) throw Error(ErrorCode::kInternal, "simulator returned no frame");
     MetricFrame m = ConvertToMetric(*f);
+    MetricFrame p = m;
     ApplyCalibrationInPlace(m, c);
     ComputeDeltaLInto(m, {}, m.delta_l_m);
+    ApplyCalibrationInPlace(p, eq1_only);
+    ComputeDeltaLInto(p, {}, p.delta_l_m);
     in.frames.push_back(std::move(*f));
     in.ready.push_back(std::move(m));
+    in.peer_ready.push_back(std::move(p));
   }
   return in;
 }
@@ -209,9 +218,7 @@ struct Stage {
   std::function<void(Workspace&, std::size_t)> run;
 };
 
-void Sink(Workspace& ws, const void* p) {
-  ws.sink += reinterpret_cast<std::uintptr_t>(p) & 1u;
-}
+void Sink(Workspace& ws, const void* p) { ws.sink += reinterpret_cast<std::uintptr_t>(p) & 1u; }
 
 std::vector<Stage> MakeStages() {
   std::vector<Stage> s;
@@ -236,8 +243,8 @@ std::vector<Stage> MakeStages() {
       {"filter: flying pixel", "flying_pixel"},   {"filter: jump edge", "jump_edge"},
       {"filter: Weingarten cells", "weingarten"}};
   const std::map<std::string, double> filter_bytes = {
-      {"accuracy", 4 + 2 + 2},   {"amplitude", 4 + 2 + 2},    {"saturation", 4 + 4 + 2 + 2},
-      {"range", 4 + 2 + 2},      {"flying_pixel", 4 + 2 + 2}, {"jump_edge", 4 + 12 + 2 + 2},
+      {"accuracy", 4 + 2 + 2},       {"amplitude", 4 + 2 + 2},    {"saturation", 4 + 4 + 2 + 2},
+      {"range", 4 + 2 + 2},          {"flying_pixel", 4 + 2 + 2}, {"jump_edge", 4 + 12 + 2 + 2},
       {"weingarten", 4 + 12 + 2 + 2}};
   for (const auto& [label, key] : filters) {
     const FilterSetOptions o = OnlyFilter(key);
@@ -247,12 +254,12 @@ std::vector<Stage> MakeStages() {
                    Sink(ws, f.data());
                  }});
   }
-  s.push_back({"filters: paper default set", 4 + 4 + 4 + 2 + 2, 1, true,
-               [](Workspace& ws, std::size_t i) {
-                 const Image<PixelFlags> f =
-                     ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, {});
-                 Sink(ws, f.data());
-               }});
+  s.push_back(
+      {"filters: paper default set", 4 + 4 + 4 + 2 + 2, 1, true, [](Workspace& ws, std::size_t i) {
+         const Image<PixelFlags> f =
+             ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, {});
+         Sink(ws, f.data());
+       }});
   const FilterSetOptions all = AllFilters();
   s.push_back({"filters: full set (all 7)", 4 + 4 + 4 + 4 + 12 + 2 + 2, 1, true,
                [all](Workspace& ws, std::size_t i) {
@@ -260,11 +267,11 @@ std::vector<Stage> MakeStages() {
                      ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, all);
                  Sink(ws, f.data());
                }});
-  s.push_back({"point cloud", 4 + 4 + 4 + 4 + 2 + 12 + 24 + 2, 1, true,
-               [](Workspace& ws, std::size_t i) {
-                 MakePointCloudInto(ws.ready[i % ws.ready.size()], ws.input->rays, ws.cloud);
-                 Sink(ws, ws.cloud.x.data());
-               }});
+  s.push_back(
+      {"point cloud", 4 + 4 + 4 + 4 + 2 + 12 + 24 + 2, 1, true, [](Workspace& ws, std::size_t i) {
+         MakePointCloudInto(ws.ready[i % ws.ready.size()], ws.input->rays, ws.cloud);
+         Sink(ws, ws.cloud.x.data());
+       }});
   s.push_back({"false colour", 4 + 2 + 3, 1, true, [](Workspace& ws, std::size_t i) {
                  const Image<Rgb8> img = FalseColor(ws.ready[i % ws.ready.size()], {});
                  Sink(ws, img.data());
@@ -274,23 +281,23 @@ std::vector<Stage> MakeStages() {
                      ws.controller->Update(ws.ready[i % ws.ready.size()]));
                }});
   // Five frames at -60..60 degrees into the 180-degree cloud and panorama; per input frame.
-  s.push_back({"pan assembly (5 frames)", 4 + 4 + 2 + 12 + 16, 5, true,
-               [](Workspace& ws, std::size_t) {
-                 const PanView v = MakePanView(ws.pan_frames, ws.input->rays, {});
-                 Sink(ws, v.panorama.data());
-               }});
+  s.push_back(
+      {"pan assembly (5 frames)", 4 + 4 + 2 + 12 + 16, 5, true, [](Workspace& ws, std::size_t) {
+         const PanView v = MakePanView(ws.pan_frames, ws.input->rays, {});
+         Sink(ws, v.panorama.data());
+       }});
   // The issue-4 target: metric + calibration + ΔL + threshold + point cloud, back to back into
   // reused buffers. Floor: registers, offsets and rays in; metric frame, ΔL and cloud out.
-  s.push_back({"PAPER CHAIN (target)", 6 + 4 + 12 + 14 + 4 + 26, 1, true,
-               [](Workspace& ws, std::size_t i) {
-                 MetricFrame& m = ws.metric;
-                 ConvertToMetricInto(ws.frames[i % ws.frames.size()], {}, m);
-                 ApplyCalibrationInPlace(m, ws.input->calibration);
-                 ComputeDeltaLInto(m, {}, m.delta_l_m);
-                 MergeFlags(m, AccuracyThresholdFilter(m, {}));
-                 MakePointCloudInto(m, ws.input->rays, ws.cloud);
-                 Sink(ws, ws.cloud.x.data());
-               }});
+  s.push_back(
+      {"PAPER CHAIN (target)", 6 + 4 + 12 + 14 + 4 + 26, 1, true, [](Workspace& ws, std::size_t i) {
+         MetricFrame& m = ws.metric;
+         ConvertToMetricInto(ws.frames[i % ws.frames.size()], {}, m);
+         ApplyCalibrationInPlace(m, ws.input->calibration);
+         ComputeDeltaLInto(m, {}, m.delta_l_m);
+         MergeFlags(m, AccuracyThresholdFilter(m, {}));
+         MakePointCloudInto(m, ws.input->rays, ws.cloud);
+         Sink(ws, ws.cloud.x.data());
+       }});
   s.push_back({"PIPELINE (Pipeline::Process, defaults)", 6 + 4 + 12 + 14 + 4 + 26, 1, true,
                [](Workspace& ws, std::size_t i) {
                  ws.pipeline_default->Process(ws.frames[i % ws.frames.size()], ws.result);
@@ -426,7 +433,12 @@ bool IsBad(const MetricFrame& m, std::size_t i) {
 // distance: float32 x, y, z, bad) and tofcam's filter results on the same points.
 void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& dir,
                  double min_time_s, json& out) {
-  std::filesystem::create_directories(dir);
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    throw Error(ErrorCode::kIo,
+                "--export-peers: cannot create folder " + dir.string() + ": " + ec.message());
+  }
   json res = json::array();
   const std::pair<const char*, FilterSetOptions> configs[] = {
       {"tofcam accuracy threshold", OnlyFilter("accuracy")},
@@ -443,8 +455,8 @@ void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& 
   for (const Input& in : inputs) {
     if (in.pixels() > 640 * 480) continue;  // peers take seconds per megapixel frame
     json files = json::array();
-    for (std::size_t f = 0; f < in.ready.size(); ++f) {
-      const MetricFrame& m = in.ready[f];
+    for (std::size_t f = 0; f < in.peer_ready.size(); ++f) {
+      const MetricFrame& m = in.peer_ready[f];
       PointCloudOptions co;
       co.nan_mask = kRejectMask;
       const PointCloud cloud = MakePointCloud(m, in.rays, co);
@@ -454,14 +466,13 @@ void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& 
         rows.insert(rows.end(), {cloud.x[i], cloud.y[i], cloud.z[i], IsBad(m, i) ? 1.0f : 0.0f});
       }
       const std::string name = in.name + "_frame" + std::to_string(f) + ".f32";
-      WriteFileAtomically(dir / name,
-                          std::string_view(reinterpret_cast<const char*>(rows.data()),
-                                           rows.size() * sizeof(float)));
+      WriteFileAtomically(dir / name, std::string_view(reinterpret_cast<const char*>(rows.data()),
+                                                       rows.size() * sizeof(float)));
       files.push_back(name);
     }
     for (const auto& [label, options] : configs) {
       std::int64_t bad = 0, good = 0, bad_removed = 0, good_lost = 0;
-      for (const MetricFrame& m : in.ready) {
+      for (const MetricFrame& m : in.peer_ready) {
         const Image<PixelFlags> flags = ApplyFilters(m, in.rays, options);
         for (std::size_t i = 0; i < m.radial_distance_m.size(); ++i) {
           if (!m.flags[i].Valid() || !std::isfinite(m.radial_distance_m[i])) continue;
@@ -477,7 +488,7 @@ void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& 
       }
       std::vector<Workspace> ws(1);
       ws[0].input = &in;
-      ws[0].ready = in.ready;
+      ws[0].ready = in.peer_ready;
       const FilterSetOptions o = options;
       const double ns = TimePerCall(
           ws, 1,
@@ -488,7 +499,7 @@ void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& 
           min_time_s);
       res.push_back({{"method", label},
                      {"resolution", in.name},
-                     {"frames", in.ready.size()},
+                     {"frames", in.peer_ready.size()},
                      {"ms_per_frame", ns * 1e-6},
                      {"bad_points", bad},
                      {"good_points", good},
@@ -529,9 +540,7 @@ void RunBench(const BenchOptions& o) {
   std::vector<int> thread_counts;
   if (o.threads != 2) thread_counts.push_back(1);
   if (o.threads != 1) thread_counts.push_back(2);
-  auto progress = [&](const std::string& s) {
-    std::fprintf(stderr, "bench: %s\n", s.c_str());
-  };
+  auto progress = [&](const std::string& s) { std::fprintf(stderr, "bench: %s\n", s.c_str()); };
 
   json report;
   report["machine"] = Machine();
@@ -586,8 +595,7 @@ void RunBench(const BenchOptions& o) {
             static_cast<std::size_t>(s.bytes_per_pixel / 2 * static_cast<double>(in.pixels()));
         auto it = floor_cache.find({t, bytes});
         if (it == floor_cache.end()) {
-          it = floor_cache.emplace(std::pair{t, bytes}, MemcpyNs(ws, t, bytes, o.min_time_s))
-                   .first;
+          it = floor_cache.emplace(std::pair{t, bytes}, MemcpyNs(ws, t, bytes, o.min_time_s)).first;
         }
         r.memcpy_ns = it->second;
         if (t > 1) r.note = "2 frames concurrently";
@@ -606,8 +614,8 @@ void RunBench(const BenchOptions& o) {
         // Frame with truth: 3 x 2 registers + 4 truth distance + 2 causes + 4 sigma bytes.
         rows.push_back({std::string("recording write (") + label + ")", in.name, in.pixels(), 1,
                         wns, 0, 0, "HDF5 to " + dir.string()});
-        rows.push_back({std::string("recording read (") + label + ")", in.name, in.pixels(), 1,
-                        rns, 0, 0, "HDF5 from " + dir.string()});
+        rows.push_back({std::string("recording read (") + label + ")", in.name, in.pixels(), 1, rns,
+                        0, 0, "HDF5 from " + dir.string()});
       }
     }
   }
@@ -619,9 +627,9 @@ void RunBench(const BenchOptions& o) {
     for (int th : thread_counts) {
       sim_rows.push_back({"SR-2 pavilion, moving camera, 2x2 supersampling, all effects", th,
                           SimulatorFps(MovingPavilion(), sim::ResolveCameraModel("sr2"), th, t)});
-      sim_rows.push_back({"SR-2 pavilion, static camera", th,
-                          SimulatorFps(sim::LoadBuiltinScene("pavilion"),
-                                       sim::ResolveCameraModel("sr2"), th, t)});
+      sim_rows.push_back(
+          {"SR-2 pavilion, static camera", th,
+           SimulatorFps(sim::LoadBuiltinScene("pavilion"), sim::ResolveCameraModel("sr2"), th, t)});
       sim_rows.push_back(
           {"generic 640x480 model, pavilion, moving camera", th,
            SimulatorFps(MovingPavilion(), sim::ResolveCameraModel("generic640x480"), th, t)});
@@ -674,21 +682,21 @@ void RunBench(const BenchOptions& o) {
     if (r.resolution != last) {
       last = r.resolution;
       std::printf("\n== %s (%lld px)\n%-40s %3s %11s %8s %10s %11s %7s\n", r.resolution.c_str(),
-                  static_cast<long long>(r.pixels), "stage", "thr", "us/frame", "ns/px",
-                  "frames/s", "memcpy us", "ratio");
+                  static_cast<long long>(r.pixels), "stage", "thr", "us/frame", "ns/px", "frames/s",
+                  "memcpy us", "ratio");
     }
-    std::printf("%-40s %3d %11.1f %8.2f %10.0f", r.stage.c_str(), r.threads,
-                r.ns_per_frame * 1e-3, r.ns_per_frame / static_cast<double>(r.pixels),
-                1e9 / r.ns_per_frame);
+    std::printf("%-40s %3d %11.1f %8.2f %10.0f", r.stage.c_str(), r.threads, r.ns_per_frame * 1e-3,
+                r.ns_per_frame / static_cast<double>(r.pixels), 1e9 / r.ns_per_frame);
     if (r.bytes_per_pixel > 0) {
       std::printf(" %11.1f %7.1f\n", r.memcpy_ns * 1e-3, r.ns_per_frame / r.memcpy_ns);
     } else {
       std::printf(" %11s %7s\n", "-", "-");
     }
   }
-  std::printf("\n2-thread rows: two frames processed concurrently (no stage has a threaded path);\n"
-              "time is wall time per frame. memcpy: a copy with the stage's minimal memory "
-              "traffic.\n");
+  std::printf(
+      "\n2-thread rows: two frames processed concurrently (no stage has a threaded path);\n"
+      "time is wall time per frame. memcpy: a copy with the stage's minimal memory "
+      "traffic.\n");
   if (!sim_rows.empty()) {
     std::printf("\n== simulator (SimulatedCamera::Grab)\n%-60s %3s %10s\n", "scene", "thr",
                 "frames/s");
@@ -700,9 +708,10 @@ void RunBench(const BenchOptions& o) {
 
 void SetupBenchCommand(CLI::App& app) {
   auto opts = std::make_shared<BenchOptions>();
-  CLI::App* sub = app.add_subcommand(
-      "bench", "Time every pipeline stage and the simulator on simulated frames (see "
-               "docs/benchmarks.md)");
+  CLI::App* sub =
+      app.add_subcommand("bench",
+                         "Time every pipeline stage and the simulator on simulated frames (see "
+                         "docs/benchmarks.md)");
   sub->add_flag("--json", opts->json_output, "Print JSON instead of the table");
   sub->add_option("--frames", opts->frames, "Simulated frames per resolution, 1..1000")
       ->capture_default_str();
