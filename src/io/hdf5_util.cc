@@ -44,6 +44,40 @@ Handle OpenDataset(const std::filesystem::path& file, hid_t loc, const std::stri
   if (!Exists(loc, name)) Fail(ErrorCode::kFormat, file, "missing dataset '" + name + "'");
   Handle d(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), H5Dclose);
   if (!d.valid()) Fail(ErrorCode::kFormat, file, "'" + name + "' is not a readable dataset");
+  // libhdf5 sizes its read and decompression buffers from the dataset's stored chunk sizes and
+  // chunk shape. In a damaged file those can claim gigabytes (found by fuzz_recording), so both
+  // are bounded before any read: stored bytes cannot exceed the file, and one chunk must fit a
+  // sane buffer.
+  constexpr hsize_t kMaxChunkBytes = hsize_t{1} << 28;
+  hsize_t file_bytes = 0;
+  const hid_t file_id = H5Iget_file_id(d.get());
+  const bool have_size = file_id >= 0 && H5Fget_filesize(file_id, &file_bytes) >= 0;
+  if (file_id >= 0) H5Fclose(file_id);
+  if (!have_size) Fail(ErrorCode::kFormat, file, "cannot determine the file size");
+  const hsize_t stored = H5Dget_storage_size(d.get());
+  if (stored > file_bytes) {
+    Fail(ErrorCode::kFormat, file,
+         "dataset '" + name + "' claims " + std::to_string(stored) + " stored bytes in a file of " +
+             std::to_string(file_bytes) + " (corrupted)");
+  }
+  Handle plist(H5Dget_create_plist(d.get()), H5Pclose);
+  if (plist.valid() && H5Pget_layout(plist.get()) == H5D_CHUNKED) {
+    hsize_t chunk[H5S_MAX_RANK] = {};
+    const int rank = H5Pget_chunk(plist.get(), H5S_MAX_RANK, chunk);
+    Handle type(H5Dget_type(d.get()), H5Tclose);
+    const std::size_t element = type.valid() ? H5Tget_size(type.get()) : 0;
+    if (rank <= 0 || element == 0) {
+      Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an unreadable chunk layout");
+    }
+    hsize_t bytes = element;
+    for (int i = 0; i < rank; ++i) {
+      if (chunk[i] == 0 || bytes > kMaxChunkBytes / chunk[i]) {
+        Fail(ErrorCode::kFormat, file,
+             "dataset '" + name + "' has a chunk larger than 256 MiB (corrupted?)");
+      }
+      bytes *= chunk[i];
+    }
+  }
   return d;
 }
 

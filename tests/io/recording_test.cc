@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -394,6 +395,27 @@ TEST_F(HostileRecording, FrameCountBeyondDataIsClampedToCompleteFrames) {
   SetInt(g, "frame_count", 50);
   H5Fclose(g);
   EXPECT_EQ(RecordingReader(file).frame_count(), 3u);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+// A fuzzer-found recording (kept in tests/data/fuzz) whose damaged chunk index makes libhdf5 ask
+// for a 4 GB read buffer. The reader must refuse it with a format error before reading.
+TEST(HostileRecordingRegression, CorruptedChunkSizesAreRejectedBeforeReading) {
+  const std::filesystem::path p =
+      std::filesystem::path(TOFCAM_TEST_DATA_DIR) / "fuzz" / "recording_huge_chunk.h5";
+  try {
+    RecordingReader reader(p);
+    for (std::size_t i = 0; i < reader.frame_count(); ++i) (void)reader.Read(i);
+    FAIL() << "a corrupted recording was read without error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kFormat) << e.what();
+    EXPECT_NE(std::string(e.what()).find("recording_huge_chunk.h5"), std::string::npos);
+  }
 }
 
 }  // namespace
