@@ -5,13 +5,12 @@
 #include <cstring>
 #include <vector>
 
+#include "bench_common.h"
 #include "tofcam/accuracy/delta_l.h"
 
 namespace {
 
-void Resolutions(benchmark::internal::Benchmark* b) {
-  b->Args({160, 124})->Args({640, 480})->Args({1024, 1024});
-}
+using tofcam::bench::Resolutions;
 
 void SetCounters(benchmark::State& state) {
   const auto n = state.range(0) * state.range(1);

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <vector>
 
+#include "bench_common.h"
 #include "tofcam/calibration/offset_calibration.h"
 #include "tofcam/pipeline/metric_conversion.h"
 
@@ -15,9 +16,7 @@ using tofcam::Frame;
 using tofcam::Image;
 using tofcam::MetricFrame;
 
-void Resolutions(benchmark::internal::Benchmark* b) {
-  b->Args({160, 124})->Args({640, 480})->Args({1024, 1024});
-}
+using tofcam::bench::Resolutions;
 
 Frame MakeFrame(int w, int h) {
   Frame f;

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <vector>
 
+#include "bench_common.h"
 #include "tofcam/cloud/point_cloud.h"
 #include "tofcam/io/cloud_io.h"
 
@@ -17,9 +18,7 @@ using tofcam::Image;
 using tofcam::MetricFrame;
 using tofcam::PixelFlags;
 
-void Resolutions(benchmark::internal::Benchmark* b) {
-  b->Args({160, 124})->Args({640, 480})->Args({1024, 1024});
-}
+using tofcam::bench::Resolutions;
 
 tofcam::CameraIntrinsics Intrinsics(int w, int h) {
   tofcam::CameraIntrinsics k = tofcam::CameraIntrinsics::SwissRangerSr2();

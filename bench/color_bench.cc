@@ -5,6 +5,7 @@
 #include <cstring>
 #include <vector>
 
+#include "bench_common.h"
 #include "tofcam/color/false_color.h"
 
 namespace {
@@ -13,9 +14,7 @@ using tofcam::Image;
 using tofcam::MetricFrame;
 using tofcam::PixelFlags;
 
-void Resolutions(benchmark::internal::Benchmark* b) {
-  b->Args({160, 124})->Args({640, 480})->Args({1024, 1024});
-}
+using tofcam::bench::Resolutions;
 
 // A distance ramp over [0.5, 7] m with every 10th pixel rejected.
 MetricFrame MakeFrame(int w, int h) {
@@ -34,17 +33,8 @@ MetricFrame MakeFrame(int w, int h) {
   return f;
 }
 
-void BM_CopyFloor(benchmark::State& state) {
-  const auto n = static_cast<std::size_t>(state.range(0) * state.range(1));
-  // Reads 4 bytes and writes 4 per pixel: a little more than false colour's 4 in, 3 out.
-  std::vector<float> src(n, 1.0f), dst(n);
-  for (auto _ : state) {
-    std::memcpy(dst.data(), src.data(), n * sizeof(float));
-    benchmark::DoNotOptimize(dst.data());
-    benchmark::ClobberMemory();
-  }
-  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(n));
-}
+// Reads 4 bytes and writes 4 per pixel: a little more than false colour's 4 in, 3 out.
+void BM_CopyFloor(benchmark::State& state) { tofcam::bench::CopyFloatChannel(state); }
 BENCHMARK(BM_CopyFloor)->Apply(Resolutions);
 
 void BM_FalseColor(benchmark::State& state) {

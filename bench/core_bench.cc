@@ -5,14 +5,13 @@
 #include <cstring>
 #include <vector>
 
+#include "bench_common.h"
 #include "tofcam/core/camera_intrinsics.h"
 
 namespace {
 
 // Resolutions used across the suite: SR-2, VGA, 1 megapixel.
-void Resolutions(benchmark::internal::Benchmark* b) {
-  b->Args({160, 124})->Args({640, 480})->Args({1024, 1024});
-}
+using tofcam::bench::Resolutions;
 
 // Copies three 16-bit channels (what a frame carries): the floor for a pass over a frame.
 void BM_MemcpyFrame(benchmark::State& state) {

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <vector>
 
+#include "bench_common.h"
 #include "tofcam/filters/filter_set.h"
 
 namespace {
@@ -18,9 +19,7 @@ using tofcam::MetricFrame;
 using tofcam::PixelFlags;
 using tofcam::RayTable;
 
-void Resolutions(benchmark::internal::Benchmark* b) {
-  b->Args({160, 124})->Args({640, 480})->Args({1024, 1024});
-}
+using tofcam::bench::Resolutions;
 
 // SR-2 optics scaled to the requested size (same field of view).
 CameraIntrinsics Intrinsics(int w, int h) {
@@ -77,16 +76,7 @@ void Run(benchmark::State& state, Fn&& fn) {
 }
 
 // Floor: copy one float channel and write one flags image (what a per-pixel filter touches).
-void BM_CopyFloor(benchmark::State& state) {
-  const auto n = static_cast<std::size_t>(state.range(0) * state.range(1));
-  std::vector<float> src(n, 1.0f), dst(n);
-  for (auto _ : state) {
-    std::memcpy(dst.data(), src.data(), n * sizeof(float));
-    benchmark::DoNotOptimize(dst.data());
-    benchmark::ClobberMemory();
-  }
-  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(n));
-}
+void BM_CopyFloor(benchmark::State& state) { tofcam::bench::CopyFloatChannel(state); }
 BENCHMARK(BM_CopyFloor)->Apply(Resolutions);
 
 void BM_AccuracyThreshold(benchmark::State& s) {

@@ -10,6 +10,7 @@
 #include <optional>
 #include <vector>
 
+#include "bench_common.h"
 #include "tofcam/pipeline/pipeline.h"
 #include "tofcam/sim/simulated_camera.h"
 
@@ -21,9 +22,7 @@ using tofcam::MetricFrame;
 // Registers, offsets and rays in; metric frame (14), ΔL (4) and cloud (26) out, bytes per pixel.
 constexpr double kChainTrafficBytesPerPixel = 6 + 4 + 12 + 14 + 4 + 26;
 
-void Resolutions(benchmark::internal::Benchmark* b) {
-  b->Args({160, 124})->Args({640, 480})->Args({1024, 1024});
-}
+using tofcam::bench::Resolutions;
 
 struct Input {
   tofcam::CameraInfo info;
