@@ -21,7 +21,9 @@ bool RegisterCommand(const std::string& name, CommandSetup setup) {
 
 }  // namespace tofcam::cli
 
-int main(int argc, char** argv) {
+namespace {
+
+int Run(int argc, char** argv) {
   CLI::App app{"tofcam: time-of-flight cameras for mobile robots"};
   try {
     app.set_version_flag("--version", tofcam::kVersionString);
@@ -34,9 +36,22 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tofcam: error (%s): %s\n", std::string(ErrorCodeName(e.code())).c_str(),
                  e.what());
     return tofcam::ExitStatus(e.code());
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "tofcam: internal error: %s\n", e.what());
-    return tofcam::ExitStatus(tofcam::ErrorCode::kInternal);
   }
   return 0;
+}
+
+}  // namespace
+
+// Everything that can throw, including the construction of the CLI11 app, runs inside Run(), so
+// no exception escapes main (clang-tidy bugprone-exception-escape) and the user always gets a
+// one-line reason and a non-zero status.
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tofcam: internal error: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "tofcam: internal error: unknown exception\n");
+  }
+  return tofcam::ExitStatus(tofcam::ErrorCode::kInternal);
 }
