@@ -2,11 +2,14 @@
 // facing a flat wall, optionally followed by a wall sweep for the distance-dependent correction.
 // Progress goes to stderr, the summary to stdout, the calibration to --out (docs/calibration.md).
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "camera_source.h"
 #include "commands.h"
@@ -30,6 +33,13 @@ struct CalibrateOptions {
   double warmup_max_drift_mm_per_s = 0.05;
   int warmup_max_frames = 9000;
   std::string controller = "vendor-histogram";
+  int exposure_frames = 20;  // 0: no exposure-offset measurement
+  bool noise = false;
+  int noise_frames = 30;
+  bool setpoint = false;
+  std::string setpoint_camera;  // "" = --camera
+  int setpoint_steps = 32;
+  bool wall = false;  // --wall-distance-m given
   CameraSourceOptions source;
 };
 
@@ -65,7 +75,102 @@ void Progress(const CalibrationProgress& p) {
                p.total, p.message.c_str());
 }
 
+// A calibration that only carries camera-level measurements (noise, set point): zero offsets,
+// so eq. 1 is the identity; frames_averaged 0 and wall distance 0 mark it (docs/calibration.md).
+OffsetCalibration MeasurementsOnly(const CameraInfo& info) {
+  OffsetCalibration c;
+  c.camera_model = info.model;
+  c.width = info.width();
+  c.height = info.height();
+  c.modulation_frequency_hz = info.modulation_frequency_hz;
+  c.created_unix_s = static_cast<std::int64_t>(std::time(nullptr));
+  c.offset_m = Image<float>(c.width, c.height, 0.0f);
+  return c;
+}
+
+void RunNoiseCalibration(Camera& camera, OffsetCalibration& calibration, int frames) {
+  NoiseCalibrationOptions options;
+  options.frames = frames;
+  DeltaLScaleFit fit;
+  calibration.noise = CalibrateNoise(camera, options, Progress, &fit);
+  std::printf(
+      "noise calibration: sigma = %.4g x dL of eq. 2 (median sigma/dL %.4g, R^2 %.3f, %d "
+      "pixels, %d static frames at register %d)\n",
+      fit.scale, fit.median_ratio, fit.r_squared, fit.pixels_used, fit.frames,
+      camera.IntegrationTimeRegister());
+}
+
+void SetpointSweep(const CalibrateOptions& o, OffsetCalibration& calibration) {
+  const std::string spec = o.setpoint_camera.empty() ? o.camera : o.setpoint_camera;
+  std::unique_ptr<Camera> camera = OpenCamera(spec, o.source);
+  CheckCalibrationMatches(calibration, camera->Info());
+  IntegrationSweepOptions sweep;
+  sweep.steps = o.setpoint_steps;
+  const std::vector<IntegrationSweepPoint> points = SweepIntegrationTime(*camera, sweep, Progress);
+  SetpointOptions choose;
+  choose.min_register = camera->Info().min_integration_register;
+  choose.max_register = camera->Info().max_integration_register;
+  ControllerSetpoint setpoint = ChooseSetpoint(points, choose);
+  setpoint.scene = spec;
+  std::printf("\nintegration-time sweep of %s (paper fig. 3):\n%8s %10s %10s %10s\n", spec.c_str(),
+              "register", "intensity", "amplitude", "saturated");
+  for (const IntegrationSweepPoint& p : points) {
+    std::printf(
+        "%8d %10.0f %10.0f %9.1f%%%s\n", p.integration_register, p.mean_intensity, p.mean_amplitude,
+        p.saturated_fraction * 100,
+        p.integration_register == setpoint.amplitude_max_register ? "  <- amplitude max" : "");
+  }
+  std::printf(
+      "controller set point: amplitude maximum at register %d (mean intensity %.0f) -> I_A = "
+      "%.0f, c_0 = %d (%.0f intensity units per register), V_p = %.3g\n",
+      setpoint.amplitude_max_register, setpoint.amplitude_max_intensity, setpoint.target_intensity,
+      setpoint.bias_register, setpoint.intensity_per_register,
+      setpoint.gain_register_per_intensity);
+  calibration.controller_setpoint = setpoint;
+}
+
 void RunCalibrate(const CalibrateOptions& o) {
+  if (!o.wall && !o.noise && !o.setpoint) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "nothing to calibrate: give --wall-distance-m (wall calibration), --noise and/or "
+                "--setpoint");
+  }
+  if (o.noise_frames < 3 || o.noise_frames > 100000) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--noise-frames " + std::to_string(o.noise_frames) + " must be in [3, 100000]");
+  }
+  if (o.exposure_frames < 0 || o.exposure_frames > 100000) {
+    throw Error(
+        ErrorCode::kInvalidArgument,
+        "--exposure-frames " + std::to_string(o.exposure_frames) + " must be in [0, 100000]");
+  }
+  const std::filesystem::path out_dir = std::filesystem::path(o.out).parent_path();
+  if (!out_dir.empty() && !std::filesystem::is_directory(out_dir)) {
+    throw Error(ErrorCode::kIo,
+                "--out " + o.out + ": directory " + out_dir.string() + " does not exist");
+  }
+  if (!o.wall) {
+    // Measurements only: added to the calibration in --out, or to a new one with zero offsets.
+    std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
+    OffsetCalibration calibration;
+    if (std::filesystem::exists(o.out)) {
+      calibration = LoadCalibration(o.out);
+      CheckCalibrationMatches(calibration, camera->Info());
+      std::printf("updating %s\n", o.out.c_str());
+    } else {
+      calibration = MeasurementsOnly(camera->Info());
+      std::printf(
+          "%s does not exist: writing zero offsets (eq. 1 = identity) with the "
+          "measurements below\n",
+          o.out.c_str());
+    }
+    if (o.noise) RunNoiseCalibration(*camera, calibration, o.noise_frames);
+    camera.reset();
+    if (o.setpoint) SetpointSweep(o, calibration);
+    SaveCalibration(o.out, calibration);
+    std::printf("wrote %s\n", o.out.c_str());
+    return;
+  }
   if (!(o.wall_distance_m > 0.0) || !std::isfinite(o.wall_distance_m)) {
     throw Error(ErrorCode::kInvalidArgument,
                 "--wall-distance-m " + std::to_string(o.wall_distance_m) + " must be > 0");
@@ -89,6 +194,11 @@ void RunCalibrate(const CalibrateOptions& o) {
   wall.frames = o.frames;
   wall.warmup_max_drift_m_per_s = o.warmup_max_drift_mm_per_s * 1e-3;
   wall.warmup_max_frames = o.warmup_max_frames;
+  if (o.exposure_frames == 0) {
+    wall.exposure_fractions.clear();
+  } else {
+    wall.exposure_frames = o.exposure_frames;
+  }
   if (o.controller != ControllerKindName(wall.controller.kind)) {
     wall.controller = ControllerOptions{};
     wall.controller.kind = ParseControllerKind(o.controller);
@@ -102,13 +212,8 @@ void RunCalibrate(const CalibrateOptions& o) {
   wall.Validate();
   if (o.sweep) sweep.Validate();
 
-  // Fail before minutes of calibration, not after: the output directory must exist and the
-  // sweep must stay inside the camera's unambiguous range.
-  const std::filesystem::path out_dir = std::filesystem::path(o.out).parent_path();
-  if (!out_dir.empty() && !std::filesystem::is_directory(out_dir)) {
-    throw Error(ErrorCode::kIo,
-                "--out " + o.out + ": directory " + out_dir.string() + " does not exist");
-  }
+  // Fail before minutes of calibration, not after: the output directory must exist (checked
+  // above) and the sweep must stay inside the camera's unambiguous range.
   std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
   const double range_m = camera->Info().unambiguous_range_m();
   if (o.sweep && o.sweep_to_m >= range_m) {
@@ -129,6 +234,20 @@ void RunCalibrate(const CalibrateOptions& o) {
       report.mean_offset_m * 1e3, report.offset_rms_m * 1e3, report.noise_sigma_m * 1e3,
       report.noise_sigma_m * 1e3 / std::sqrt(static_cast<double>(o.frames)), o.frames,
       report.uncalibrated_pixels);
+  if (report.exposure_registers.size() >= 2) {
+    std::printf("exposure offset: %.4f mm per ms of integration time (shift",
+                calibration.exposure_offset_m_per_ms * 1e3);
+    for (std::size_t k = 0; k < report.exposure_registers.size(); ++k) {
+      std::printf(" %+.2f mm at register %d", report.exposure_shift_m[k] * 1e3,
+                  report.exposure_registers[k]);
+    }
+    std::printf("); per-pixel slopes spread %.4f mm/ms, noise alone %.4f mm/ms\n",
+                report.exposure_pixel_slope_sd_m_per_ms * 1e3,
+                report.exposure_pixel_slope_noise_m_per_ms * 1e3);
+  } else {
+    std::printf("exposure offset: not measured (0)\n");
+  }
+  if (o.noise) RunNoiseCalibration(*camera, calibration, o.noise_frames);
 
   if (o.sweep) {
     const bool has_kind = o.camera.find(':') != std::string::npos;
@@ -157,6 +276,8 @@ void RunCalibrate(const CalibrateOptions& o) {
         sweep_report.held_out_rms_before_m * 1e3, sweep_report.held_out_rms_after_m * 1e3,
         sweep_report.held_out_noise_floor_m * 1e3);
   }
+  camera.reset();
+  if (o.setpoint) SetpointSweep(o, calibration);
   SaveCalibration(o.out, calibration);
   std::printf("wrote %s\n", o.out.c_str());
 }
@@ -169,8 +290,8 @@ void SetupCalibrateCommand(CLI::App& app) {
                   "Camera facing a wall, e.g. sim:wall?distance_m=2; " + CameraSourceHelp())
       ->required();
   sub->add_option("--wall-distance-m", o->wall_distance_m,
-                  "Perpendicular camera-to-wall distance, m")
-      ->required();
+                  "Perpendicular camera-to-wall distance, m (the wall calibration; without it "
+                  "only --noise / --setpoint are measured and added to --out)");
   sub->add_option("--out", o->out, "Calibration file to write (YAML, docs/calibration.md)")
       ->required();
   sub->add_option("--frames", o->frames, "Frames averaged at the wall (1..100000)")
@@ -196,12 +317,35 @@ void SetupCalibrateCommand(CLI::App& app) {
                   "Exposure controller: vendor-histogram, may-incremental, may-proportional, "
                   "fixed")
       ->capture_default_str();
+  sub->add_option("--exposure-frames", o->exposure_frames,
+                  "Frames per integration time for the exposure offset (0 = do not measure)")
+      ->capture_default_str();
+  sub->add_flag("--noise", o->noise,
+                "Noise calibration of eq. 2 from static frames of --camera (stored in --out)");
+  sub->add_option("--noise-frames", o->noise_frames, "Static frames for --noise (3..100000)")
+      ->capture_default_str();
+  sub->add_flag("--setpoint", o->setpoint,
+                "Integration-time sweep of the working scene: the controller's I_A, c_0, V_p "
+                "(stored in --out)");
+  sub->add_option("--setpoint-camera", o->setpoint_camera,
+                  "Camera looking at the working scene for --setpoint (default: --camera), "
+                  "e.g. sim:pavilion");
+  sub->add_option("--setpoint-steps", o->setpoint_steps, "Registers in the sweep (3..1000)")
+      ->capture_default_str();
+  sub->add_option("--integration-register", o->source.integration_time_register,
+                  "Integration-time register to open the camera with (0 = its default)")
+      ->capture_default_str();
   sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
   sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
   sub->callback([o, sub] {
     CalibrateOptions run = *o;
     for (const char* name : {"--sweep-from-m", "--sweep-to-m", "--sweep-step-m"}) {
       if (sub->count(name) > 0) run.sweep = true;
+    }
+    run.wall = sub->count("--wall-distance-m") > 0;
+    if (sub->count("--setpoint-camera") > 0) run.setpoint = true;
+    if (run.sweep && !run.wall) {
+      throw Error(ErrorCode::kInvalidArgument, "--sweep needs --wall-distance-m");
     }
     RunCalibrate(run);
   });

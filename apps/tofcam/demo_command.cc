@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -78,10 +80,12 @@ sim::SimulatorOptions Simulator(const DemoOptions& o, std::uint64_t seed_offset)
   return s;
 }
 
-// Step 1: the calibration file, reused when it fits the camera.
+// Step 1: the calibration file (offsets, exposure offset, noise scale, controller set point),
+// reused when it fits the camera; parts it lacks are measured and added.
 OffsetCalibration Calibrate(const DemoOptions& o, const sim::CameraModel& model,
                             const fs::path& path, nlohmann::json& report) {
   const CameraInfo info = model.Info(model.modulation_frequencies_hz.front());
+  std::optional<OffsetCalibration> calibration;
   if (!o.recalibrate && fs::exists(path)) {
     try {
       OffsetCalibration cached = LoadCalibration(path);
@@ -91,128 +95,190 @@ OffsetCalibration Calibrate(const DemoOptions& o, const sim::CameraModel& model,
           "redo)\n",
           path.c_str(), cached.camera_model.c_str(), cached.width, cached.height,
           cached.wall_distance_m);
+      calibration = std::move(cached);
       report["reused"] = true;
-      return cached;
     } catch (const Error& e) {
       std::printf("1/3 calibration: %s does not fit (%s); calibrating again\n", path.c_str(),
                   e.what());
     }
   }
   const Clock::time_point start = Clock::now();
-  std::printf("1/3 calibration: simulated white wall at %.2f m (paper section II-B)...\n",
-              o.wall_distance_m);
-  std::fflush(stdout);
-  sim::SimulatedCamera wall(
-      sim::LoadBuiltinScene("wall", {{"distance_m", std::to_string(o.wall_distance_m)}}), model,
-      Simulator(o, 1000));
-  WallCalibrationOptions options;
-  options.wall_distance_m = o.wall_distance_m;
-  WallCalibrationReport r;
-  OffsetCalibration calibration = CalibrateOffsets(wall, options, {}, &r);
-  calibration.created_unix_s = std::chrono::duration_cast<std::chrono::seconds>(
-                                   std::chrono::system_clock::now().time_since_epoch())
-                                   .count();
-  SaveCalibration(path, calibration);
-  std::printf(
-      "    register %d after %d exposure frames, %d warm-up frames (drift %.3f mm/s), "
-      "%d frames averaged\n",
-      r.integration_register, r.exposure_frames, r.warmup_frames, r.drift_m_per_s * 1e3,
-      options.frames);
-  std::printf(
-      "    offsets: mean %.1f mm, RMS %.1f mm (the error eq. 1 removes); per-frame noise "
-      "%.1f mm; %.1f s\n",
-      r.mean_offset_m * 1e3, r.offset_rms_m * 1e3, r.noise_sigma_m * 1e3, Seconds(start));
-  report["reused"] = false;
-  report["integration_register"] = r.integration_register;
-  report["warmup_frames"] = r.warmup_frames;
-  report["offset_rms_m"] = r.offset_rms_m;
-  report["noise_sigma_m"] = r.noise_sigma_m;
-  report["seconds"] = Seconds(start);
-  return calibration;
-}
-
-// The noise calibration of stage 3: temporal σ of static wall frames against ΔL of eq. 2 gives
-// the factor that turns ΔL into metres of standard deviation (tof-notes §1, note on eq. 2).
-double FitNoiseScale(const DemoOptions& o, const sim::CameraModel& model,
-                     const OffsetCalibration& calibration, nlohmann::json& report) {
-  constexpr int kFrames = 30;
-  sim::SimulatedCamera wall(
-      sim::LoadBuiltinScene("wall", {{"distance_m", std::to_string(calibration.wall_distance_m)}}),
-      model, Simulator(o, 2000));
-  wall.SetIntegrationTimeRegister(calibration.integration_time_register);
-  std::vector<MetricFrame> frames;
-  for (int k = 0; k < kFrames; ++k) {
-    const std::optional<Frame> frame = wall.Grab();
-    if (!frame) throw Error(ErrorCode::kInternal, "the simulator stopped delivering frames");
-    frames.push_back(ConvertToMetric(*frame));
+  const std::map<std::string, std::string> wall_at = {
+      {"distance_m", std::to_string(o.wall_distance_m)}};
+  if (!calibration) {
+    std::printf(
+        "1/3 calibration: simulated white wall at %.2f m (paper section II-B), then the "
+        "exposure offset at 1/4 and 1/2 of its integration time...\n",
+        o.wall_distance_m);
+    std::fflush(stdout);
+    sim::SimulatedCamera wall(sim::LoadBuiltinScene("wall", wall_at), model, Simulator(o, 1000));
+    WallCalibrationOptions options;
+    options.wall_distance_m = o.wall_distance_m;
+    WallCalibrationReport r;
+    calibration = CalibrateOffsets(wall, options, {}, &r);
+    std::printf(
+        "    register %d after %d exposure frames, %d warm-up frames (drift %.3f mm/s), "
+        "%d frames averaged\n",
+        r.integration_register, r.exposure_frames, r.warmup_frames, r.drift_m_per_s * 1e3,
+        options.frames);
+    std::printf(
+        "    offsets: mean %.1f mm, RMS %.1f mm (the error eq. 1 removes); per-frame noise "
+        "%.1f mm\n",
+        r.mean_offset_m * 1e3, r.offset_rms_m * 1e3, r.noise_sigma_m * 1e3);
+    std::printf(
+        "    exposure offset: %.3f mm per ms of integration time (%zu registers; eq. 1 "
+        "subtracts s (t - t_cal) per frame)\n",
+        calibration->exposure_offset_m_per_ms * 1e3, r.exposure_registers.size());
+    report["reused"] = false;
+    report["integration_register"] = r.integration_register;
+    report["warmup_frames"] = r.warmup_frames;
+    report["offset_rms_m"] = r.offset_rms_m;
+    report["noise_sigma_m"] = r.noise_sigma_m;
+    report["exposure_offset_m_per_ms"] = calibration->exposure_offset_m_per_ms;
   }
-  const DeltaLScaleFit fit = FitDeltaLScale(frames);
+  bool changed = !report.value("reused", false);
+  if (!calibration->distance_correction) {
+    // The wiggling error (odd harmonics, period L/4) is distance dependent: the offsets alone
+    // leave w(t) - w(t_wall), tens of mm across the hall. The wall sweep (docs/calibration.md)
+    // removes it; exposure-compensated, so it holds at every integration time.
+    std::printf("    wall sweep 0.5..7 m for the distance-dependent correction...\n");
+    std::fflush(stdout);
+    std::unique_ptr<sim::SimulatedCamera> moved;
+    std::uint64_t sweep_seed = 4000;
+    const WallCameraSource source = [&](double distance_m) -> Camera& {
+      moved.reset();
+      moved = std::make_unique<sim::SimulatedCamera>(
+          sim::LoadBuiltinScene("wall", {{"distance_m", std::to_string(distance_m)}}), model,
+          Simulator(o, sweep_seed++));
+      return *moved;
+    };
+    SweepOptions sweep;
+    sweep.wall.wall_distance_m = calibration->wall_distance_m;
+    SweepReport r;
+    calibration = CalibrateDistanceCorrection(*calibration, source, sweep, {}, &r);
+    std::printf(
+        "    held-out walls: RMS error %.1f mm with the offsets only (eq. 1), %.1f mm with the "
+        "distance correction (noise floor of the averages %.1f mm)\n",
+        r.held_out_rms_before_m * 1e3, r.held_out_rms_after_m * 1e3,
+        r.held_out_noise_floor_m * 1e3);
+    report["sweep_held_out_rms_before_m"] = r.held_out_rms_before_m;
+    report["sweep_held_out_rms_after_m"] = r.held_out_rms_after_m;
+    report["sweep_held_out_noise_floor_m"] = r.held_out_noise_floor_m;
+    changed = true;
+  }
+  if (!calibration->noise) {
+    // Stage 3's noise calibration: temporal σ of static wall frames against ΔL of eq. 2 gives
+    // the factor that turns ΔL into metres of standard deviation (tof-notes §1).
+    sim::SimulatedCamera wall(sim::LoadBuiltinScene("wall", wall_at), model, Simulator(o, 2000));
+    wall.SetIntegrationTimeRegister(calibration->integration_time_register);
+    calibration->noise = CalibrateNoise(wall);
+    changed = true;
+  }
   std::printf(
-      "    noise calibration: sigma = %.3f x dL of eq. 2 (R^2 %.3f, %d pixels, %d frames); "
+      "    noise calibration: sigma = %.3f x dL of eq. 2 (R^2 %.2f, %d pixels, %d frames); "
       "dL below is eq. 2 times this\n",
-      fit.scale, fit.r_squared, fit.pixels_used, fit.frames);
-  report["delta_l_scale"] = fit.scale;
-  report["delta_l_scale_r_squared"] = fit.r_squared;
-  return fit.scale;
+      calibration->noise->delta_l_scale, calibration->noise->r_squared,
+      calibration->noise->pixels_used, calibration->noise->frames);
+  if (!calibration->controller_setpoint) {
+    // The paper chose I_A from an integration-time sweep of its scene (fig. 3): a little below
+    // the intensity at the amplitude maximum. Same here, on the hall of the demo scene.
+    sim::SimulatedCamera hall(sim::LoadBuiltinScene("pavilion"), model, Simulator(o, 3000));
+    std::vector<IntegrationSweepPoint> sweep = SweepIntegrationTime(hall);
+    ControllerSetpoint setpoint = ChooseSetpoint(sweep);
+    setpoint.scene = "sim:pavilion";
+    calibration->controller_setpoint = setpoint;
+    nlohmann::json points = nlohmann::json::array();
+    for (const IntegrationSweepPoint& p : sweep) {
+      points.push_back(
+          {p.integration_register, p.mean_intensity, p.mean_amplitude, p.saturated_fraction});
+    }
+    report["integration_sweep"] = {
+        {"columns", {"register", "intensity", "amplitude", "saturated_fraction"}},
+        {"points", points}};
+    changed = true;
+  }
+  const ControllerSetpoint& sp = *calibration->controller_setpoint;
+  std::printf(
+      "    controller set point (integration-time sweep of the empty hall, paper fig. 3): "
+      "amplitude maximum at register %d, mean intensity %.0f there -> I_A = %.0f at c_0 = %d "
+      "(%.0f intensity units per register), V_p = %.3g\n",
+      sp.amplitude_max_register, sp.amplitude_max_intensity, sp.target_intensity, sp.bias_register,
+      sp.intensity_per_register, sp.gain_register_per_intensity);
+  if (changed) {
+    calibration->created_unix_s = std::chrono::duration_cast<std::chrono::seconds>(
+                                      std::chrono::system_clock::now().time_since_epoch())
+                                      .count();
+    SaveCalibration(path, *calibration);
+    std::printf("    wrote %s (%.1f s)\n", path.c_str(), Seconds(start));
+  }
+  report["delta_l_scale"] = calibration->noise->delta_l_scale;
+  report["delta_l_scale_r_squared"] = calibration->noise->r_squared;
+  report["exposure_offset_m_per_ms"] = calibration->exposure_offset_m_per_ms;
+  report["seconds"] = Seconds(start);
+  return std::move(*calibration);
 }
 
-// Tunes the printed P-law for the scene (the paper gives I_A but no V_p or c_0): MayIncremental,
-// which has no steady-state offset (its gain set from a first slope measurement so that it
-// converges), finds the register c* at which the empty hall gives I_A;
-// c_0 = c* then removes the position form's offset there (tof-notes §1). The slope k of
-// intensity over register at c* sets V_p = 0.4 / k: the loop gain V_p k stays below 1 (no
-// oscillation) even where the scene is twice as responsive, as with the hand close to the lens.
-ControllerOptions TuneController(const DemoOptions& o, const sim::CameraModel& model,
-                                 nlohmann::json& report) {
-  constexpr int kProbeFrames = 40;
-  sim::SimulatedCamera probe(sim::LoadBuiltinScene("demo"), model, Simulator(o, 3000));
-  PipelineOptions probe_options;
-  probe_options.controller_enabled = false;  // the search below drives the register
-  Pipeline pipeline(probe_options, probe.Info());
-  PipelineResult result;
-  const auto grab = [&] {
-    const std::optional<Frame> frame = probe.Grab();
-    if (!frame) throw Error(ErrorCode::kInternal, "the simulator stopped delivering frames");
-    pipeline.Process(*frame, result);
-  };
-  // Mean intensity per register step between registers `at` - 5 and `at` + 5.
-  const auto slope_at = [&](int at) {
-    const int lo = std::max(at - 5, model.min_integration_register);
-    const int hi = std::min(at + 5, model.max_integration_register);
-    probe.SetIntegrationTimeRegister(lo);
-    grab();
-    const double low = result.stats.mean_intensity;
-    probe.SetIntegrationTimeRegister(hi);
-    grab();
-    return (result.stats.mean_intensity - low) / std::max(hi - lo, 1);
-  };
+// What the controller saw and did in one frame.
+struct ControlPoint {
+  double time_s = 0.0;
+  int integration_register = 0;
+  double control_intensity = 0.0;  // Ī as the controller computes it (clipped pixels included)
+  double clipped_fraction = 0.0;   // pixels at full-scale intensity
+};
 
-  ControllerOptions c;
-  c.target_intensity = 16000.0;  // the paper's I_A (15000..18000 worked)
-  const double first_slope = slope_at(c.bias_register);
-  c.kind = ControllerKind::kMayIncremental;
-  c.gain_register_per_intensity = first_slope > 0 ? std::min(0.5 / first_slope, 1.0) : 2.5e-4;
-  const std::unique_ptr<IntegrationTimeController> search = MakeController(c);
-  probe.SetIntegrationTimeRegister(c.bias_register);
-  for (int k = 0; k < kProbeFrames; ++k) {
-    grab();
-    probe.SetIntegrationTimeRegister(search->Update(result.frame));
+ControlPoint ControlSample(const PipelineResult& result, const ControllerOptions& c) {
+  ControlPoint p;
+  p.time_s = result.stats.timestamp_s;
+  p.integration_register = result.stats.integration_time_register;
+  p.control_intensity =
+      MeanControlIntensity(result.frame, c.roi, c.exclude_flags, c.clipped_intensity);
+  std::size_t clipped = 0;
+  const Image<float>& intensity = result.frame.intensity;
+  for (std::size_t i = 0; i < intensity.size(); ++i) {
+    clipped += intensity[i] >= c.clipped_intensity ? 1 : 0;
   }
-  const int settled = probe.IntegrationTimeRegister();
-  const double slope = slope_at(settled);
+  p.clipped_fraction = static_cast<double>(clipped) /
+                       static_cast<double>(std::max<std::size_t>(1, intensity.size()));
+  return p;
+}
 
-  c.kind = ControllerKind::kMayProportional;
-  c.bias_register = settled;
-  c.gain_register_per_intensity = slope > 0 ? std::min(0.4 / slope, 1.0) : 2.5e-4;
-  std::printf(
-      "    P-controller: empty hall reaches I_A = %.0f at register %d, %.0f intensity "
-      "units per register -> c_0 = %d, V_p = %.3g\n",
-      c.target_intensity, settled, slope, c.bias_register, c.gain_register_per_intensity);
-  report["target_intensity"] = c.target_intensity;
-  report["bias_register"] = c.bias_register;
-  report["gain_register_per_intensity"] = c.gain_register_per_intensity;
-  report["intensity_per_register"] = slope;
-  return c;
+// The controller over the three phases of the demo scene (scenes/demo.yaml: the hand is in
+// place 2.5-4.5 s, the lamps are on 6-8.5 s), medians over each phase.
+nlohmann::json ReportControllerResponse(const std::vector<ControlPoint>& trace,
+                                        const ControllerOptions& c) {
+  struct Phase {
+    const char* name;
+    double from_s, to_s;
+  };
+  constexpr Phase kPhases[] = {{"empty hall", 0.0, 1.5}, {"hand", 2.5, 4.5}, {"lamps", 6.5, 8.5}};
+  const auto median = [](std::vector<double> v) {
+    if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  nlohmann::json out = nlohmann::json::array();
+  std::printf("    controller (printed law c = c_0 - V_p (I - I_A), c_0 %d, I_A %.0f):",
+              c.bias_register, c.target_intensity);
+  for (const Phase& phase : kPhases) {
+    std::vector<double> reg, intensity, clipped;
+    for (const ControlPoint& p : trace) {
+      if (p.time_s < phase.from_s || p.time_s >= phase.to_s) continue;
+      reg.push_back(p.integration_register);
+      intensity.push_back(p.control_intensity);
+      clipped.push_back(p.clipped_fraction);
+    }
+    const double r = median(reg), i = median(intensity), k = median(clipped);
+    std::printf(" %s: register %.0f, mean intensity %.0f, clipped %.1f%%;", phase.name, r, i,
+                k * 100);
+    out.push_back({{"phase", phase.name},
+                   {"from_s", phase.from_s},
+                   {"to_s", phase.to_s},
+                   {"register", Real(r)},
+                   {"control_intensity", Real(i)},
+                   {"clipped_fraction", Real(k)}});
+  }
+  std::printf("\n");
+  return out;
 }
 
 // Statistics of the raw view: the same frame judged with the input flags only.
@@ -223,6 +289,70 @@ FrameStats RawStats(const PipelineResult& result, const PipelineOptions& options
   stats.intensity_roi = options.controller.roi;
   stats.intensity_exclude_flags = options.controller.exclude_flags;
   return ComputeFrameStats(raw, stats);
+}
+
+// Why the kept pixels that are still wrong (error > bad_error_m) are wrong, by the simulator's
+// ground-truth cause; and the error of the kept pixels without the depth-edge (mixed) ones,
+// which the accuracy filter is not meant to catch (tof-notes §1; the jump-edge and flying-pixel
+// filters are).
+struct KeptErrorBreakdown {
+  int kept = 0;
+  int bad = 0;
+  int bad_mixed = 0;
+  int bad_scattering = 0;
+  int bad_multipath_or_motion = 0;
+  int bad_other = 0;  // no cause flagged: noise, wiggling, calibration residual
+  double rmse_without_mixed_m = 0.0;
+  double median_abs_error_m = 0.0;
+};
+
+KeptErrorBreakdown Breakdown(const PipelineResult& result, double bad_error_m) {
+  KeptErrorBreakdown b;
+  const MetricFrame& f = result.frame;
+  if (!f.truth) return b;
+  std::vector<double> errors;
+  double sum2 = 0.0;
+  int n = 0;
+  for (std::size_t i = 0; i < f.flags.size(); ++i) {
+    const float truth = f.truth->radial_distance_m[i];
+    if (!f.flags[i].Valid() || !std::isfinite(truth)) continue;
+    const double e = f.radial_distance_m[i] - truth;
+    const PixelFlags cause = f.truth->causes[i];
+    ++b.kept;
+    errors.push_back(std::abs(e));
+    if (!cause.Has(Flag::kMixed)) {
+      sum2 += e * e;
+      ++n;
+    }
+    if (std::abs(e) <= bad_error_m) continue;
+    ++b.bad;
+    if (cause.Has(Flag::kMixed)) {
+      ++b.bad_mixed;
+    } else if (cause.Has(Flag::kScattering)) {
+      ++b.bad_scattering;
+    } else if (cause.Has(Flag::kMultipath) || cause.Has(Flag::kMotion)) {
+      ++b.bad_multipath_or_motion;
+    } else {
+      ++b.bad_other;
+    }
+  }
+  if (n > 0) b.rmse_without_mixed_m = std::sqrt(sum2 / n);
+  if (!errors.empty()) {
+    std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
+    b.median_abs_error_m = errors[errors.size() / 2];
+  }
+  return b;
+}
+
+nlohmann::json BreakdownJson(const KeptErrorBreakdown& b) {
+  return {{"kept_pixels_with_truth", b.kept},
+          {"kept_bad", b.bad},
+          {"kept_bad_mixed_edge", b.bad_mixed},
+          {"kept_bad_scattering", b.bad_scattering},
+          {"kept_bad_multipath_or_motion", b.bad_multipath_or_motion},
+          {"kept_bad_no_cause_flagged", b.bad_other},
+          {"rmse_without_mixed_m", b.rmse_without_mixed_m},
+          {"median_abs_error_m", b.median_abs_error_m}};
 }
 
 nlohmann::json StatsJson(const FrameStats& s) {
@@ -260,8 +390,16 @@ void RunDemo(const DemoOptions& o) {
   // --- 1. Calibration -------------------------------------------------------------------------
   OffsetCalibration calibration =
       Calibrate(o, model, out / "calibration.yaml", summary["calibration"]);
-  const double delta_l_scale = FitNoiseScale(o, model, calibration, summary["calibration"]);
-  const ControllerOptions controller = TuneController(o, model, summary["controller"]);
+  const double delta_l_scale = calibration.noise->delta_l_scale;
+  const ControllerSetpoint setpoint = *calibration.controller_setpoint;
+  const ControllerOptions controller = setpoint.Apply(ControllerOptions{});
+  summary["controller"] = {{"target_intensity", setpoint.target_intensity},
+                           {"bias_register", setpoint.bias_register},
+                           {"gain_register_per_intensity", setpoint.gain_register_per_intensity},
+                           {"amplitude_max_register", setpoint.amplitude_max_register},
+                           {"amplitude_max_intensity", setpoint.amplitude_max_intensity},
+                           {"intensity_per_register", setpoint.intensity_per_register},
+                           {"setpoint_scene", setpoint.scene}};
 
   // --- 2. The demo sequence -------------------------------------------------------------------
   const Clock::time_point run_start = Clock::now();
@@ -288,6 +426,7 @@ void RunDemo(const DemoOptions& o) {
   std::string csv = "frame," + FrameStatsCsvHeader() + "\n";
   RunStatsAccumulator accumulator;
   PipelineResult result;
+  std::vector<ControlPoint> trace;
   std::size_t next_moment = 0;
   nlohmann::json moments = nlohmann::json::array();
   Clock::time_point last_status = run_start;
@@ -298,6 +437,7 @@ void RunDemo(const DemoOptions& o) {
     camera.SetIntegrationTimeRegister(result.next_integration_register);
     accumulator.Add(result.stats);
     csv += std::to_string(k) + "," + FrameStatsCsvRow(result.stats) + "\n";
+    trace.push_back(ControlSample(result, pipeline.options().controller));
 
     if (next_moment < std::size(kMoments) &&
         result.stats.timestamp_s >= kMoments[next_moment].time_s) {
@@ -314,10 +454,17 @@ void RunDemo(const DemoOptions& o) {
           s.timestamp_s, m.what, s.integration_time_register, s.mean_intensity,
           raw.valid_fraction * 100, Mm(raw.rmse_m).c_str(), s.valid_fraction * 100,
           Mm(s.rmse_m).c_str(), s.bad_removed_fraction * 100, s.good_kept_fraction * 100);
+      const KeptErrorBreakdown kept = Breakdown(result, options.stats.bad_error_m);
+      std::printf(
+          "      kept: median |error| %s, RMSE without depth-edge pixels %s; of %d kept bad "
+          "pixels %d are depth edges (mixed), %d scattering, %d multipath/motion, %d other\n",
+          Mm(kept.median_abs_error_m).c_str(), Mm(kept.rmse_without_mixed_m).c_str(), kept.bad,
+          kept.bad_mixed, kept.bad_scattering, kept.bad_multipath_or_motion, kept.bad_other);
       moments.push_back({{"name", m.name},
                          {"what", m.what},
                          {"raw", StatsJson(raw)},
                          {"filtered", StatsJson(s)},
+                         {"filtered_kept_errors", BreakdownJson(kept)},
                          {"files", {stem + "_raw.png", stem + "_filtered.png", stem + ".ply"}}});
     }
     if (Seconds(last_status) >= 1.0) {
@@ -336,6 +483,7 @@ void RunDemo(const DemoOptions& o) {
       static_cast<unsigned long long>(run.frames), run_s, run.frames / run_s,
       run.mean_valid_fraction * 100, Mm(run.mean_delta_l_m).c_str(), Mm(run.rmse_m).c_str(),
       run.bad_removed_fraction * 100, run.good_kept_fraction * 100);
+  summary["controller_response"] = ReportControllerResponse(trace, c);
 
   // --- 3. Pan sweep ---------------------------------------------------------------------------
   const Clock::time_point pan_start = Clock::now();
@@ -399,14 +547,34 @@ void RunDemo(const DemoOptions& o) {
 
   std::printf("\ndone in %.1f s. Look at %s/:\n", Seconds(start), o.out.c_str());
   std::printf(
-      "  moment_{before,hand,lamps}_{raw,filtered}.png  false colour (yellow near, blue "
-      "far, black rejected) without / with the accuracy filter\n");
-  std::printf("  moment_*.ply     the kept points of those frames (camera frame)\n");
+      "  moment_before_raw.png next to moment_before_filtered.png: the accuracy filter keeps the "
+      "well-lit near objects and removes the noisy far hall (its dL is large)\n"
+      "  moment_hand_*.png: the clipped hand has no phase (black in both); the filter removes "
+      "the far hall, part of the scattering halo around the fingers survives (docs/demo.md)\n"
+      "  moment_{before,hand,lamps}_{raw,filtered}.png  false colour, yellow 0 m -> red -> "
+      "magenta -> blue L = 7.5 m, black = rejected\n"
+      "  moment_*.ply     the kept points of those frames (camera frame)\n"
+      "  panorama_{raw,filtered}.png  the 180 deg strip, left = +90 deg; .ply: its cloud (pan "
+      "unit's base frame)\n"
+      "  frames.csv       one row per frame (register, intensity, valid, dL, RMSE, bad removed, "
+      "good kept)\n"
+      "  summary.json     every number printed here; calibration.yaml the calibration (offsets, "
+      "exposure offset, distance correction, noise scale, controller set point)\n");
   std::printf(
-      "  panorama_{raw,filtered}.png  the 180 deg false-colour strip; .ply: its cloud "
-      "(base frame of the pan unit)\n");
-  std::printf("  frames.csv       one row per frame (register, intensity, valid, dL, RMSE)\n");
-  std::printf("  summary.json     the numbers above; calibration.yaml the offset matrix\n");
+      "What the numbers mean:\n"
+      "  register, intensity  the P-controller's integration-time register and the mean "
+      "intensity it controls (clipped pixels included). I_A and c_0 come from the hall's "
+      "integration-time sweep, so it holds c_0 there; the hand and the lamps raise the "
+      "intensity and it backs off by V_p (I - I_A) registers: the printed position law, "
+      "which stops short of unclipping the hand (docs/controllers.md)\n"
+      "  dL                   predicted 1-sigma noise of a pixel (eq. 2 x the noise "
+      "calibration's scale); valid = kept by the saturation filter and dL <= %.0f mm\n"
+      "  bad removed / good kept  pixels whose error against the simulator's truth is above / "
+      "within %.0f mm and that the filters removed / kept\n"
+      "  RMSE of kept pixels  dominated by a few depth-edge (mixed) pixels metres off, which "
+      "the accuracy filter is not meant to remove; the median |error| and the RMSE without "
+      "depth edges describe the rest\n",
+      options.filters.accuracy.max_delta_l_m * 1e3, options.stats.bad_error_m * 1e3);
 }
 
 void SetupDemoCommand(CLI::App& app) {

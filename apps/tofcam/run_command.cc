@@ -14,13 +14,17 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <string>
+#include <utility>
 
 #include "camera_source.h"
 #include "commands.h"
+#include "tofcam/calibration/calibration_procedure.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 #include "tofcam/io/cloud_io.h"
+#include "tofcam/io/importers.h"
 #include "tofcam/io/pipeline_config.h"
 #include "tofcam/io/png.h"
 #include "tofcam/pipeline/pipeline.h"
@@ -82,8 +86,9 @@ nlohmann::json Real(double value) {
   return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
 }
 
-PipelineOptions ResolveOptions(const RunOptions& o) {
-  PipelineOptions options = o.config.empty() ? PipelineOptions{} : LoadPipelineConfig(o.config);
+PipelineOptions ResolveOptions(const RunOptions& o, std::set<std::string>* given_keys) {
+  PipelineOptions options =
+      o.config.empty() ? PipelineOptions{} : LoadPipelineConfig(o.config, given_keys);
   if (!o.calibration.empty()) options.calibration_file = o.calibration;
   if (!o.controller.empty()) {
     if (o.controller == "none") {
@@ -97,8 +102,26 @@ PipelineOptions ResolveOptions(const RunOptions& o) {
   return options;
 }
 
+// What the camera source knows about its own noise: an importer's figure, or for a simulator
+// (and recordings of one) the ground-truth σ of its first frame.
+std::pair<std::optional<double>, std::string> SourceNoiseScale(const Camera& camera,
+                                                               const std::optional<Frame>& first) {
+  if (const auto* imported = dynamic_cast<const ImportedCamera*>(&camera)) {
+    if (imported->delta_l_scale()) {
+      return {imported->delta_l_scale(), "the importer (" + imported->delta_l_scale_note() + ")"};
+    }
+  }
+  if (first && first->truth) {
+    if (const std::optional<double> scale = GroundTruthNoiseScale(ConvertToMetric(*first))) {
+      return {scale, "the source's ground-truth noise (first frame)"};
+    }
+  }
+  return {std::nullopt, {}};
+}
+
 void RunRun(const RunOptions& o) {
-  PipelineOptions options = ResolveOptions(o);
+  std::set<std::string> given_keys;
+  PipelineOptions options = ResolveOptions(o, &given_keys);
   if (o.print_config) {
     std::fputs(PipelineConfigToYaml(options).c_str(), stdout);
     return;
@@ -129,12 +152,15 @@ void RunRun(const RunOptions& o) {
 
   std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
   LoadPipelineCalibration(options, camera->Info());
-  Pipeline pipeline(options, camera->Info());
-
+  // Camera-specific values the configuration left at their defaults come from measurements of
+  // this camera (docs/pipeline.md): the calibration file, else what the source knows.
+  MeasuredDefaults from = ApplyMeasuredDefaults(options, given_keys);
   bool controlling = options.controller_enabled;
   if (controlling) {
     try {
-      camera->SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
+      camera->SetIntegrationTimeRegister(std::clamp(options.controller.bias_register,
+                                                    camera->Info().min_integration_register,
+                                                    camera->Info().max_integration_register));
     } catch (const Error& e) {
       if (e.code() != ErrorCode::kUnsupported) throw;
       std::fprintf(stderr, "run: the camera's integration time is fixed (%s); not controlling\n",
@@ -142,6 +168,24 @@ void RunRun(const RunOptions& o) {
       controlling = false;
     }
   }
+  // A simulator's truth is read from the first frame, which is then processed first below.
+  std::optional<Frame> first;
+  const bool scale_measured =
+      given_keys.count("accuracy.scale") > 0 || (options.calibration && options.calibration->noise);
+  if (!scale_measured) {
+    if (camera->Info().has_ground_truth) first = camera->Grab();
+    const auto [source_scale, source_note] = SourceNoiseScale(*camera, first);
+    from = ApplyMeasuredDefaults(options, given_keys, source_scale, source_note);
+  }
+  std::fprintf(stderr, "run: dL scale %.4g from %s\n", options.accuracy.scale,
+               from.delta_l_scale.c_str());
+  if (options.controller_enabled) {
+    std::fprintf(stderr, "run: controller I_A %.0f, V_p %.3g, c_0 %d from %s\n",
+                 options.controller.target_intensity,
+                 options.controller.gain_register_per_intensity, options.controller.bias_register,
+                 from.controller.c_str());
+  }
+  Pipeline pipeline(options, camera->Info());
 
   std::fprintf(csv.get(), "frame,%s,elapsed_s\n", FrameStatsCsvHeader().c_str());
   SigintGuard sigint;
@@ -155,7 +199,7 @@ void RunRun(const RunOptions& o) {
   bool end_of_stream = false;
 
   while (done < o.frames && !g_interrupted.load()) {
-    std::optional<Frame> frame = camera->Grab();
+    std::optional<Frame> frame = done == 0 && first ? std::move(first) : camera->Grab();
     if (!frame) {
       end_of_stream = true;
       break;
@@ -207,6 +251,13 @@ void RunRun(const RunOptions& o) {
   json["camera_model"] = camera->Info().model;
   json["controller"] = controlling ? std::string(pipeline.ControllerName()) : "none";
   json["calibrated"] = options.calibration.has_value();
+  json["delta_l_scale"] = options.accuracy.scale;
+  json["delta_l_scale_from"] = from.delta_l_scale;
+  json["controller_setpoint"] = {
+      {"target_intensity", options.controller.target_intensity},
+      {"gain_register_per_intensity", options.controller.gain_register_per_intensity},
+      {"bias_register", options.controller.bias_register},
+      {"from", from.controller}};
   json["frames"] = summary.frames;
   json["mean_valid_fraction"] = Real(summary.mean_valid_fraction);
   json["mean_delta_l_m"] = Real(summary.mean_delta_l_m);

@@ -17,6 +17,7 @@
 
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
+#include "tofcam/filters/pixel_filters.h"
 #include "tofcam/pipeline/metric_conversion.h"
 
 namespace tofcam {
@@ -230,6 +231,103 @@ void ValidateNormal(const std::array<double, 3>& n) {
   }
 }
 
+// The exposure offset: the wall at several registers, one frame per register in turn, so that a
+// drift left after the warm-up shifts every register's average alike. Returns s in m/ms and
+// fills the exposure part of the report. `calibrated` marks the pixels of the offset matrix.
+double MeasureExposureOffset(Camera& camera, const WallCalibrationOptions& o,
+                             const Image<PixelFlags>& uncalibrated,
+                             const ProgressCallback& progress, WallCalibrationReport& r) {
+  const CameraInfo& info = camera.Info();
+  const int base = camera.IntegrationTimeRegister();
+  std::vector<int> registers = {base};
+  for (double f : o.exposure_fractions) {
+    const int reg = static_cast<int>(std::clamp(std::lround(base * f),
+                                                static_cast<long>(info.min_integration_register),
+                                                static_cast<long>(info.max_integration_register)));
+    if (std::find(registers.begin(), registers.end(), reg) == registers.end()) {
+      registers.push_back(reg);
+    }
+  }
+  r.exposure_registers = registers;
+  r.exposure_shift_m.assign(registers.size(), 0.0);
+  if (registers.size() < 2) return 0.0;
+  const double range_m = info.unambiguous_range_m();
+  std::vector<PhasorAverage> averages(registers.size(),
+                                      PhasorAverage(info.width(), info.height(), range_m));
+  std::vector<double> times_ms(registers.size(), 0.0);
+  for (int n = 1; n <= o.exposure_frames; ++n) {
+    for (std::size_t k = 0; k < registers.size(); ++k) {
+      camera.SetIntegrationTimeRegister(registers[k]);
+      const MetricFrame frame = GrabMetric(camera);
+      CheckCameraSize(frame, info);
+      // The frame's own integration time where the source reports it (that is what eq. 1 will
+      // be given later), the camera's register formula otherwise.
+      times_ms[k] = (frame.info.integration_time_us > 0.0 ? frame.info.integration_time_us
+                                                          : info.IntegrationTimeUs(registers[k])) *
+                    1e-3;
+      averages[k].Add(frame);
+    }
+    if (n % 10 == 0 || n == o.exposure_frames) {
+      Report(progress, "exposure-offset", n, o.exposure_frames,
+             "averaged " + std::to_string(n) + " frames at each of " +
+                 std::to_string(registers.size()) + " integration times");
+    }
+  }
+  camera.SetIntegrationTimeRegister(base);
+
+  // Per pixel: shifts against the calibration register (wrapped, seam-safe) and the pixel's own
+  // least-squares slope; globally: the mean shift per register and the slope through them.
+  const int min_count =
+      std::max(1, static_cast<int>(std::ceil(o.min_valid_fraction * o.exposure_frames)));
+  const std::size_t regs = registers.size();
+  double mean_t = 0.0;
+  for (double t : times_ms) mean_t += t / static_cast<double>(regs);
+  double stt = 0.0;
+  for (double t : times_ms) stt += (t - mean_t) * (t - mean_t);
+  if (!(stt > 0.0)) return 0.0;
+  std::vector<double> shift_sum(regs, 0.0);
+  double slope_sum = 0.0, slope_sq = 0.0, noise_var = 0.0;
+  int used = 0;
+  const std::size_t pixels = uncalibrated.size();
+  for (std::size_t i = 0; i < pixels; ++i) {
+    if (uncalibrated[i].Has(Flag::kInvalid)) continue;
+    bool ok = true;
+    for (const PhasorAverage& a : averages) ok = ok && a.count(i) >= min_count;
+    if (!ok) continue;
+    const double ref = averages[0].Mean(i);
+    double sty = 0.0, var = 0.0;
+    for (std::size_t k = 0; k < regs; ++k) {
+      const double y = WrapSigned(averages[k].Mean(i) - ref, range_m);
+      shift_sum[k] += y;
+      sty += (times_ms[k] - mean_t) * y;
+      const double sigma = averages[k].Sigma(i);
+      var += (times_ms[k] - mean_t) * (times_ms[k] - mean_t) * sigma * sigma / averages[k].count(i);
+    }
+    const double slope = sty / stt;
+    slope_sum += slope;
+    slope_sq += slope * slope;
+    noise_var += var / (stt * stt);
+    ++used;
+  }
+  r.exposure_pixels = used;
+  if (used < 2) return 0.0;
+  double sty = 0.0;
+  for (std::size_t k = 0; k < regs; ++k) {
+    r.exposure_shift_m[k] = shift_sum[k] / used;
+    sty += (times_ms[k] - mean_t) * r.exposure_shift_m[k];
+  }
+  const double s = sty / stt;  // equals the mean of the per-pixel slopes
+  r.exposure_offset_m_per_ms = s;
+  r.exposure_pixel_slope_sd_m_per_ms =
+      std::sqrt(std::max(0.0, (slope_sq - slope_sum * slope_sum / used) / (used - 1)));
+  r.exposure_pixel_slope_noise_m_per_ms = std::sqrt(noise_var / used);
+  Report(progress, "exposure-offset", o.exposure_frames, o.exposure_frames,
+         "exposure offset " + Num(s * 1e3) + " mm per ms of integration time (per-pixel spread " +
+             Num(r.exposure_pixel_slope_sd_m_per_ms * 1e3) + " mm/ms, noise alone " +
+             Num(r.exposure_pixel_slope_noise_m_per_ms * 1e3) + ")");
+  return s;
+}
+
 }  // namespace
 
 ControllerOptions DefaultCalibrationController() {
@@ -277,6 +375,12 @@ void WallCalibrationOptions::Validate() const {
   }
   if (!(max_uncalibrated_fraction >= 0.0 && max_uncalibrated_fraction <= 1.0)) {
     Bad("max_uncalibrated_fraction", max_uncalibrated_fraction, "must be in [0, 1]");
+  }
+  for (double f : exposure_fractions) {
+    if (!(f > 0.0 && f <= 4.0)) Bad("exposure_fractions entry", f, "must be in (0, 4]");
+  }
+  if (exposure_frames < 1 || exposure_frames > 100000) {
+    Bad("exposure_frames", exposure_frames, "must be in [1, 100000]");
   }
 }
 
@@ -379,6 +483,7 @@ OffsetCalibration CalibrateOffsets(Camera& camera, const WallCalibrationOptions&
                     " pixels saw no wall (limit max_uncalibrated_fraction = " +
                     Num(options.max_uncalibrated_fraction) + ")");
   }
+  c.exposure_offset_m_per_ms = MeasureExposureOffset(camera, options, c.pixel_flags, progress, r);
   if (r.uncalibrated_pixels == 0) c.pixel_flags = Image<PixelFlags>();
   if (good > 0) {
     r.mean_offset_m = sum / good;
@@ -401,6 +506,7 @@ struct SweepSample {
   double wall_distance_m = 0.0;
   bool held_out = false;
   int integration_register = 0;
+  double exposure_shift_m = 0.0;  // exposure term of eq. 1 at this register
   std::vector<float> measured_m;  // circular mean, [0, L)
   std::vector<float> truth_m;
   std::vector<unsigned char> usable;
@@ -523,6 +629,7 @@ OffsetCalibration CalibrateDistanceCorrection(const OffsetCalibration& base,
     s.wall_distance_m = distance;
     s.held_out = held_out;
     s.integration_register = camera.IntegrationTimeRegister();
+    s.exposure_shift_m = ExposureShiftM(base, info.IntegrationTimeUs(s.integration_register));
     s.measured_m.resize(pixels);
     s.truth_m.resize(pixels);
     s.usable.resize(pixels);
@@ -561,7 +668,7 @@ OffsetCalibration CalibrateDistanceCorrection(const OffsetCalibration& base,
       if (s.held_out) continue;
       for (std::size_t i = 0; i < pixels; ++i) {
         if (!s.usable[i]) continue;
-        const double l = EquationOne(s.measured_m[i], offset[i], range_m);
+        const double l = EquationOne(s.measured_m[i], offset[i] + s.exposure_shift_m, range_m);
         // Not wrapped: a far pixel whose noisy measurement wrapped past the 0 / L seam would put a
         // far-distance residual at l ~ 0; it is left out with the outliers.
         const double r = l - s.truth_m[i];
@@ -611,7 +718,7 @@ OffsetCalibration CalibrateDistanceCorrection(const OffsetCalibration& base,
       const double e_raw = WrapSigned(m - s.truth_m[i], range_m);
       const double e_before =
           WrapSigned(EquationOne(m, base.offset_m[i], range_m) - s.truth_m[i], range_m);
-      double l = EquationOne(m, out.offset_m[i], range_m);
+      double l = EquationOne(m, out.offset_m[i] + s.exposure_shift_m, range_m);
       l = EquationOne(l, g.Evaluate(l), range_m);
       const double e_after = WrapSigned(l - s.truth_m[i], range_m);
       raw += e_raw * e_raw;
@@ -650,6 +757,139 @@ OffsetCalibration CalibrateDistanceCorrection(const OffsetCalibration& base,
              Num(rep.held_out_rms_after_m * 1e3) + " mm after the distance correction");
   if (report) *report = std::move(rep);
   return out;
+}
+
+// --- Integration-time sweep and noise calibration ---------------------------------------------
+
+void IntegrationSweepOptions::Validate() const {
+  if (from_register < 0 || to_register < 0 || (to_register != 0 && from_register > to_register)) {
+    Bad("integration sweep from_register", from_register,
+        "must be >= 0 and below to_register = " + std::to_string(to_register));
+  }
+  if (steps < 3 || steps > 1000) Bad("integration sweep steps", steps, "must be in [3, 1000]");
+  if (frames_per_step < 1 || frames_per_step > 100) {
+    Bad("integration sweep frames_per_step", frames_per_step, "must be in [1, 100]");
+  }
+}
+
+std::vector<IntegrationSweepPoint> SweepIntegrationTime(Camera& camera,
+                                                        const IntegrationSweepOptions& options,
+                                                        const ProgressCallback& progress) {
+  options.Validate();
+  const CameraInfo& info = camera.Info();
+  const int lo = options.from_register > 0 ? options.from_register : info.min_integration_register;
+  const int hi = options.to_register > 0 ? options.to_register : info.max_integration_register;
+  if (lo < info.min_integration_register || hi > info.max_integration_register || lo >= hi) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "integration sweep registers " + std::to_string(lo) + ".." + std::to_string(hi) +
+                    " must lie within the camera's " +
+                    std::to_string(info.min_integration_register) + ".." +
+                    std::to_string(info.max_integration_register) + " and be increasing");
+  }
+  std::vector<int> registers;
+  for (int k = 0; k < options.steps; ++k) {
+    const int reg = static_cast<int>(
+        std::lround(lo + (hi - lo) * static_cast<double>(k) / (options.steps - 1)));
+    if (registers.empty() || reg > registers.back()) registers.push_back(reg);
+  }
+  const int previous = camera.IntegrationTimeRegister();
+  std::vector<IntegrationSweepPoint> points;
+  for (const int reg : registers) {
+    camera.SetIntegrationTimeRegister(reg);
+    MetricFrame frame;
+    for (int k = 0; k < options.frames_per_step; ++k) frame = GrabMetric(camera);
+    CheckCameraSize(frame, info);
+    const Image<float>& channel = frame.has_intensity() ? frame.intensity : frame.amplitude;
+    // Saturation from the registers (the SR-2 has no saturation bit) or the source's flags.
+    const Image<PixelFlags> clipped = SaturationFilter(frame, SaturationOptions{});
+    double intensity = 0.0, amplitude = 0.0;
+    std::size_t count = 0, saturated = 0;
+    for (std::size_t i = 0; i < frame.amplitude.size(); ++i) {
+      if (frame.flags[i].Has(Flag::kInvalid)) continue;
+      intensity += channel[i];
+      amplitude += frame.amplitude[i];
+      saturated += (frame.flags[i] | clipped[i]).Has(Flag::kSaturated) ? 1 : 0;
+      ++count;
+    }
+    IntegrationSweepPoint p;
+    p.integration_register = reg;
+    if (count > 0) {
+      p.mean_intensity = intensity / static_cast<double>(count);
+      p.mean_amplitude = amplitude / static_cast<double>(count);
+      p.saturated_fraction = static_cast<double>(saturated) / static_cast<double>(count);
+    }
+    points.push_back(p);
+    Report(progress, "integration-sweep", static_cast<int>(points.size()),
+           static_cast<int>(registers.size()),
+           "register " + std::to_string(reg) + ": mean intensity " + Num(p.mean_intensity) +
+               ", mean amplitude " + Num(p.mean_amplitude));
+  }
+  camera.SetIntegrationTimeRegister(previous);
+  return points;
+}
+
+void NoiseCalibrationOptions::Validate() const {
+  if (frames < 3 || frames > 100000) Bad("noise frames", frames, "must be in [3, 100000]");
+  fit.Validate();
+}
+
+NoiseCalibration CalibrateNoise(Camera& camera, const NoiseCalibrationOptions& options,
+                                const ProgressCallback& progress, DeltaLScaleFit* fit) {
+  options.Validate();
+  std::vector<MetricFrame> frames;
+  for (int n = 1; n <= options.frames; ++n) {
+    std::optional<Frame> frame = camera.Grab();
+    if (!frame) break;  // a finite source: use what it had
+    frames.push_back(ConvertToMetric(*frame));
+    CheckCameraSize(frames.back(), camera.Info());
+    if (n % 10 == 0 || n == options.frames) {
+      Report(progress, "noise", n, options.frames, "grabbed " + std::to_string(n) + " frames");
+    }
+  }
+  if (frames.size() < 3) {
+    throw Error(ErrorCode::kIo, "noise calibration: the camera delivered " +
+                                    std::to_string(frames.size()) +
+                                    " frames, at least 3 static frames are needed");
+  }
+  const DeltaLScaleFit f = FitDeltaLScale(frames, options.fit);
+  NoiseCalibration n;
+  n.delta_l_scale = f.scale;
+  n.r_squared = std::isfinite(f.r_squared) ? std::clamp(f.r_squared, -1e9, 1.0) : 0.0;
+  n.frames = f.frames;
+  n.pixels_used = f.pixels_used;
+  n.Validate();
+  Report(progress, "noise", static_cast<int>(frames.size()), options.frames,
+         "sigma = " + Num(f.scale) + " x dL of eq. 2 (R^2 " + Num(f.r_squared) + ", " +
+             std::to_string(f.pixels_used) + " pixels)");
+  if (fit) *fit = f;
+  return n;
+}
+
+std::optional<double> GroundTruthNoiseScale(const MetricFrame& frame,
+                                            const DeltaLFitOptions& options) {
+  options.Validate();
+  if (!frame.truth || frame.truth->sigma_m.empty() ||
+      !frame.truth->sigma_m.SameSize(frame.width(), frame.height())) {
+    return std::nullopt;
+  }
+  AccuracyOptions accuracy = options.accuracy;
+  accuracy.scale = 1.0;
+  const Image<float> delta_l = ComputeDeltaL(frame, accuracy);
+  double sxy = 0.0, sxx = 0.0;
+  int used = 0;
+  for (std::size_t i = 0; i < delta_l.size(); ++i) {
+    const double sigma = frame.truth->sigma_m[i];
+    const double d = delta_l[i];
+    if (!frame.flags[i].Valid() || !(sigma > 0.0) || !std::isfinite(sigma) || !(d > 0.0) ||
+        !(d <= options.max_delta_l_m)) {
+      continue;
+    }
+    sxy += sigma * sigma * d * d;
+    sxx += d * d * d * d;
+    ++used;
+  }
+  if (used < options.min_pixels || !(sxx > 0.0)) return std::nullopt;
+  return std::sqrt(sxy / sxx);
 }
 
 }  // namespace tofcam

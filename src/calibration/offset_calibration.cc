@@ -63,6 +63,16 @@ void DistanceCorrection::Validate() const {
   }
 }
 
+void NoiseCalibration::Validate() const {
+  if (!std::isfinite(delta_l_scale) || delta_l_scale <= 0.0 || delta_l_scale > 1e6) {
+    Bad("noise.delta_l_scale = " + Num(delta_l_scale) + " must be in (0, 1e6]");
+  }
+  if (!std::isfinite(r_squared) || r_squared > 1.0 || r_squared < -1e9) {
+    Bad("noise.r_squared = " + Num(r_squared) + " must be finite and <= 1");
+  }
+  if (frames < 0 || pixels_used < 0) Bad("noise.frames and noise.pixels_used must be >= 0");
+}
+
 void OffsetCalibration::Validate() const {
   if (version != kVersion) Bad("version " + std::to_string(version) + " is not supported");
   if (width <= 0 || height <= 0) {
@@ -100,6 +110,21 @@ void OffsetCalibration::Validate() const {
     Bad("pixel_flags size differs from the offset matrix");
   }
   if (distance_correction) distance_correction->Validate();
+  if (!std::isfinite(exposure_offset_m_per_ms) || std::abs(exposure_offset_m_per_ms) > 0.1) {
+    Bad("exposure_offset_m_per_ms = " + Num(exposure_offset_m_per_ms) +
+        " must be finite and within ±0.1 m/ms");
+  }
+  if (noise) noise->Validate();
+  if (controller_setpoint) controller_setpoint->Validate();
+}
+
+double ExposureShiftM(const OffsetCalibration& calibration, double integration_time_us) noexcept {
+  if (!(integration_time_us > 0.0) || !std::isfinite(integration_time_us) ||
+      calibration.exposure_offset_m_per_ms == 0.0) {
+    return 0.0;
+  }
+  return calibration.exposure_offset_m_per_ms *
+         (integration_time_us - calibration.integration_time_us) * 1e-3;
 }
 
 void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibration) {
@@ -121,6 +146,17 @@ void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibr
                                           " Hz, frame is at " + Num(f) + " Hz");
   }
   const float range = static_cast<float>(UnambiguousRangeM(f));
+  // Exposure offset (format v2): a per-frame scalar folded into the constant of eq. 1,
+  // l = (m - o - shift + L) mod L. |shift| <= L/4 keeps m - o - shift + L in [L/4, 11L/4), so
+  // the two conditional subtractions below stay exact.
+  const double shift_m = ExposureShiftM(calibration, frame.info.integration_time_us);
+  if (!(std::abs(shift_m) <= 0.25 * range)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "calibration: exposure offset " + Num(calibration.exposure_offset_m_per_ms) +
+                    " m/ms at " + Num(frame.info.integration_time_us) + " us gives a shift of " +
+                    Num(shift_m) + " m, beyond L/4");
+  }
+  const float bias = static_cast<float>(UnambiguousRangeM(f) - shift_m);
   const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
   float* d = frame.radial_distance_m.data();
   PixelFlags* flags = frame.flags.data();
@@ -129,7 +165,7 @@ void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibr
   // subtractions make the mod exact without a division. Branch-free, so it vectorises; kInvalid
   // pixels keep their value.
   for (std::size_t i = 0; i < n; ++i) {
-    float l = d[i] - o[i] + range;
+    float l = d[i] - o[i] + bias;
     l -= l >= range ? range : 0.0f;
     l -= l >= range ? range : 0.0f;
     d[i] = flags[i].Has(Flag::kInvalid) ? d[i] : l;

@@ -7,8 +7,10 @@
 #include <cstdio>
 #include <limits>
 #include <string>
+#include <utility>
 
 #include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
 
 namespace tofcam {
 namespace {
@@ -44,8 +46,12 @@ const Image<float>& ControlChannel(const MetricFrame& frame) {
   return frame.has_intensity() ? frame.intensity : frame.amplitude;
 }
 
-bool Usable(const MetricFrame& frame, std::size_t i, std::uint16_t exclude) {
-  return frame.flags.empty() || !frame.flags[i].Any(exclude);
+// A pixel counts unless it has an excluded flag; a clipped pixel counts anyway: the SR-2 reports
+// a pixel whose taps all clipped with amplitude 0 (no phase, so kInvalid) and intensity at full
+// scale, and those are exactly the pixels that must make a controller back off.
+bool Usable(const MetricFrame& frame, std::size_t i, std::uint16_t exclude, double clipped) {
+  return frame.flags.empty() || !frame.flags[i].Any(exclude) ||
+         (clipped > 0.0 && frame.has_intensity() && frame.intensity[i] >= clipped);
 }
 
 int RoundClamp(double c, int lo, int hi) {
@@ -118,10 +124,13 @@ void ControllerOptions::Validate() const {
   if (vendor_deadband < 0 || vendor_deadband > 254) {
     Bad("vendor_deadband", std::to_string(vendor_deadband), "must be in [0, 254]");
   }
+  if (!std::isfinite(clipped_intensity) || clipped_intensity < 0.0 || clipped_intensity > 65532.0) {
+    Bad("clipped_intensity", Num(clipped_intensity), "must be in [0, 65532]");
+  }
 }
 
 double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& roi,
-                            std::uint16_t exclude_flags) {
+                            std::uint16_t exclude_flags, double clipped_intensity) {
   const Image<float>& channel = ControlChannel(frame);
   const Rect r = Clip(roi, channel.width(), channel.height());
   const bool flags_ok = frame.flags.empty() || frame.flags.SameSize(channel);
@@ -131,7 +140,7 @@ double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& ro
     const std::size_t base = static_cast<std::size_t>(row) * channel.width();
     for (int col = r.col0; col < r.col1; ++col) {
       const std::size_t i = base + col;
-      if (flags_ok && !Usable(frame, i, exclude_flags)) continue;
+      if (flags_ok && !Usable(frame, i, exclude_flags, clipped_intensity)) continue;
       const float v = channel[i];
       if (!std::isfinite(v)) continue;
       sum += v;
@@ -149,7 +158,8 @@ MayProportional::MayProportional(const ControllerOptions& options)
 }
 
 int MayProportional::Update(const MetricFrame& frame) {
-  const double mean = MeanControlIntensity(frame, options_.roi, options_.exclude_flags);
+  const double mean =
+      MeanControlIntensity(frame, options_.roi, options_.exclude_flags, options_.clipped_intensity);
   if (std::isnan(mean)) return last_register_;
   const double deviation = mean - options_.target_intensity;  // D_t
   last_register_ =
@@ -174,7 +184,8 @@ MayIncremental::MayIncremental(const ControllerOptions& options)
 }
 
 int MayIncremental::Update(const MetricFrame& frame) {
-  const double mean = MeanControlIntensity(frame, options_.roi, options_.exclude_flags);
+  const double mean =
+      MeanControlIntensity(frame, options_.roi, options_.exclude_flags, options_.clipped_intensity);
   if (!std::isnan(mean)) {
     state_ -= options_.gain_register_per_intensity * (mean - options_.target_intensity);
     state_ = std::clamp(state_, static_cast<double>(options_.min_register),
@@ -208,7 +219,9 @@ int VendorHistogram::Update(const MetricFrame& frame) {
     const std::size_t base = static_cast<std::size_t>(row) * channel.width();
     for (int col = r.col0; col < r.col1; ++col) {
       const std::size_t i = base + col;
-      if (flags_ok && !Usable(frame, i, options_.exclude_flags)) continue;
+      if (flags_ok && !Usable(frame, i, options_.exclude_flags, options_.clipped_intensity)) {
+        continue;
+      }
       const float v = channel[i];
       if (!(v >= 0.0f)) continue;  // NaN and negatives carry no exposure information
       const auto bin = static_cast<std::size_t>(std::min(v, 65535.0f)) >> 8;
@@ -260,6 +273,125 @@ int Fixed::Update(const MetricFrame& /*frame*/) { return register_; }
 std::string_view Fixed::Name() const { return ControllerKindName(ControllerKind::kFixed); }
 
 void Fixed::Reset(int /*current_register*/) {}
+
+// --- Set point from an integration-time sweep ------------------------------------------------
+
+void SetpointOptions::Validate() const {
+  if (!(target_fraction > 0.0 && target_fraction <= 1.0)) {
+    Bad("setpoint target_fraction", Num(target_fraction), "must be in (0, 1]");
+  }
+  if (!(max_loop_gain > 0.0 && max_loop_gain < 1.0)) {
+    Bad("setpoint max_loop_gain", Num(max_loop_gain), "must be in (0, 1)");
+  }
+  if (!(saturated_intensity > 0.0 && saturated_intensity <= 65532.0)) {
+    Bad("setpoint saturated_intensity", Num(saturated_intensity), "must be in (0, 65532]");
+  }
+  if (min_register < 1 || min_register > max_register || max_register > 65535) {
+    Bad("setpoint registers", std::to_string(min_register) + ".." + std::to_string(max_register),
+        "must satisfy 1 <= min <= max <= 65535");
+  }
+}
+
+void ControllerSetpoint::Validate() const {
+  if (!(target_intensity > 0.0 && target_intensity <= 65532.0)) {
+    Bad("setpoint target_intensity", Num(target_intensity), "must be in (0, 65532]");
+  }
+  if (bias_register < 1 || bias_register > 65535) {
+    Bad("setpoint bias_register", std::to_string(bias_register), "must be in [1, 65535]");
+  }
+  if (!(gain_register_per_intensity >= 0.0 && gain_register_per_intensity <= 1.0)) {
+    Bad("setpoint gain_register_per_intensity", Num(gain_register_per_intensity),
+        "must be in [0, 1]");
+  }
+  if (amplitude_max_register < 0 || amplitude_max_register > 65535) {
+    Bad("setpoint amplitude_max_register", std::to_string(amplitude_max_register),
+        "must be in [0, 65535]");
+  }
+  if (!std::isfinite(amplitude_max_intensity) || amplitude_max_intensity < 0.0) {
+    Bad("setpoint amplitude_max_intensity", Num(amplitude_max_intensity), "must be >= 0");
+  }
+  if (!std::isfinite(intensity_per_register)) {
+    Bad("setpoint intensity_per_register", Num(intensity_per_register), "must be finite");
+  }
+}
+
+ControllerOptions ControllerSetpoint::Apply(ControllerOptions base) const {
+  base.kind = ControllerKind::kMayProportional;
+  base.target_intensity = target_intensity;
+  base.gain_register_per_intensity = gain_register_per_intensity;
+  base.bias_register = std::clamp(bias_register, base.min_register, base.max_register);
+  return base;
+}
+
+ControllerSetpoint ChooseSetpoint(std::span<const IntegrationSweepPoint> sweep,
+                                  const SetpointOptions& options) {
+  options.Validate();
+  if (sweep.size() < 3) {
+    Bad("setpoint sweep", std::to_string(sweep.size()) + " points", "needs at least 3");
+  }
+  for (std::size_t k = 0; k < sweep.size(); ++k) {
+    const IntegrationSweepPoint& p = sweep[k];
+    if (p.integration_register < 1 ||
+        (k > 0 && p.integration_register <= sweep[k - 1].integration_register)) {
+      Bad("setpoint sweep register", std::to_string(p.integration_register),
+          "must be >= 1 and strictly increasing");
+    }
+    for (const auto& [name, value] : {std::pair<const char*, double>{"intensity", p.mean_intensity},
+                                      {"amplitude", p.mean_amplitude}}) {
+      if (!(value >= 0.0) || !std::isfinite(value)) {
+        Bad(std::string("setpoint sweep mean ") + name + " at register " +
+                std::to_string(p.integration_register),
+            Num(value), "must be finite and >= 0");
+      }
+    }
+  }
+  std::size_t best = 0;
+  for (std::size_t k = 1; k < sweep.size(); ++k) {
+    if (sweep[k].mean_amplitude > sweep[best].mean_amplitude) best = k;
+  }
+  ControllerSetpoint s;
+  s.amplitude_max_register = sweep[best].integration_register;
+  s.amplitude_max_intensity = sweep[best].mean_intensity;
+  s.target_intensity = std::clamp(options.target_fraction * s.amplitude_max_intensity, 1.0,
+                                  static_cast<double>(kMaxSignalRegister));
+  // c_0: where the (rising) intensity curve crosses I_A at or below the amplitude maximum.
+  double c0 = sweep.front().integration_register;
+  std::size_t seg = 0;  // segment [seg, seg + 1] used for the slope
+  for (std::size_t k = 1; k <= best; ++k) {
+    const IntegrationSweepPoint& a = sweep[k - 1];
+    const IntegrationSweepPoint& b = sweep[k];
+    if (a.mean_intensity <= s.target_intensity && b.mean_intensity >= s.target_intensity) {
+      const double span = b.mean_intensity - a.mean_intensity;
+      const double t = span > 0.0 ? (s.target_intensity - a.mean_intensity) / span : 0.0;
+      c0 = a.integration_register + t * (b.integration_register - a.integration_register);
+      seg = k - 1;
+      break;
+    }
+    if (k == best) {
+      c0 = b.integration_register;  // never reached: hold at the maximum
+      seg = k - 1;
+    }
+  }
+  s.bias_register =
+      std::clamp(static_cast<int>(std::lround(c0)), options.min_register, options.max_register);
+  const IntegrationSweepPoint& a = sweep[seg];
+  const IntegrationSweepPoint& b = sweep[std::min(seg + 1, sweep.size() - 1)];
+  s.intensity_per_register = b.integration_register > a.integration_register
+                                 ? (b.mean_intensity - a.mean_intensity) /
+                                       (b.integration_register - a.integration_register)
+                                 : 0.0;
+  // V_p spans the register range below c_0 over the intensities above I_A (a saturated image
+  // drives the register to its minimum), unless that makes the loop gain at c_0 too high.
+  double vp = options.saturated_intensity > s.target_intensity
+                  ? (s.bias_register - options.min_register) /
+                        (options.saturated_intensity - s.target_intensity)
+                  : 0.0;
+  if (s.intensity_per_register > 0.0) {
+    vp = std::min(vp, options.max_loop_gain / s.intensity_per_register);
+  }
+  s.gain_register_per_intensity = std::clamp(vp, 0.0, 1.0);
+  return s;
+}
 
 std::unique_ptr<IntegrationTimeController> MakeController(const ControllerOptions& options) {
   options.Validate();

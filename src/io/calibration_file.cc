@@ -131,6 +131,8 @@ void SaveCalibration(const std::filesystem::path& path, const OffsetCalibration&
       << calibration.wall_normal[0] << calibration.wall_normal[1] << calibration.wall_normal[2]
       << YAML::EndSeq;
   out << YAML::Key << "frames_averaged" << YAML::Value << calibration.frames_averaged;
+  out << YAML::Key << "exposure_offset_m_per_ms" << YAML::Value
+      << calibration.exposure_offset_m_per_ms;
   out << YAML::Key << "offset_m" << YAML::Value << YAML::BeginSeq;
   for (int r = 0; r < calibration.height; ++r) {
     out << YAML::Flow << YAML::BeginSeq;
@@ -158,6 +160,28 @@ void SaveCalibration(const std::filesystem::path& path, const OffsetCalibration&
     for (float v : g.correction_m) out << v;
     out << YAML::EndSeq << YAML::EndMap;
   }
+  if (calibration.noise) {
+    const NoiseCalibration& n = *calibration.noise;
+    out << YAML::Key << "noise" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "delta_l_scale" << YAML::Value << n.delta_l_scale;
+    out << YAML::Key << "r_squared" << YAML::Value << n.r_squared;
+    out << YAML::Key << "frames" << YAML::Value << n.frames;
+    out << YAML::Key << "pixels_used" << YAML::Value << n.pixels_used;
+    out << YAML::EndMap;
+  }
+  if (calibration.controller_setpoint) {
+    const ControllerSetpoint& p = *calibration.controller_setpoint;
+    out << YAML::Key << "controller_setpoint" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "target_intensity" << YAML::Value << p.target_intensity;
+    out << YAML::Key << "bias_register" << YAML::Value << p.bias_register;
+    out << YAML::Key << "gain_register_per_intensity" << YAML::Value
+        << p.gain_register_per_intensity;
+    out << YAML::Key << "amplitude_max_register" << YAML::Value << p.amplitude_max_register;
+    out << YAML::Key << "amplitude_max_intensity" << YAML::Value << p.amplitude_max_intensity;
+    out << YAML::Key << "intensity_per_register" << YAML::Value << p.intensity_per_register;
+    out << YAML::Key << "scene" << YAML::Value << YAML::DoubleQuoted << p.scene;
+    out << YAML::EndMap;
+  }
   out << YAML::EndMap;
   if (!out.good()) {
     throw Error(ErrorCode::kInternal, "calibration YAML emitter: " + out.GetLastError());
@@ -177,24 +201,38 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
                 source + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
   }
   if (!root.IsMap()) in.Fail("not a tofcam calibration file (expected a YAML mapping)");
-  in.CheckKeys(
-      root,
-      {"format", "version", "camera_model", "width", "height", "modulation_frequency_hz",
-       "integration_time_us", "integration_time_register", "created_unix_s", "wall_distance_m",
-       "wall_normal", "frames_averaged", "offset_m", "uncalibrated_pixels", "distance_correction"},
-      "calibration");
   const YAML::Node format = in.Required(root, "format");
   if (in.String(format, "format") != kFormatTag) {
     in.Fail(format, "format is '" + format.Scalar() + "', expected '" + kFormatTag + "'");
   }
   OffsetCalibration c;
   const YAML::Node version = in.Required(root, "version");
-  c.version = static_cast<int>(in.Integer(version, "version", 0, 1 << 30));
-  if (c.version != OffsetCalibration::kVersion) {
-    in.Fail(version, "unsupported version " + std::to_string(c.version) +
-                         " (this build reads version " +
+  const int file_version = static_cast<int>(in.Integer(version, "version", 0, 1 << 30));
+  if (file_version < 1 || file_version > OffsetCalibration::kVersion) {
+    in.Fail(version, "unsupported version " + std::to_string(file_version) +
+                         " (this build reads versions 1 to " +
                          std::to_string(OffsetCalibration::kVersion) + ")");
   }
+  // Version 1 predates the exposure offset, the noise calibration and the controller set point:
+  // it loads with s = 0 (no exposure compensation, as it was applied then) and neither section.
+  std::set<std::string> keys = {"format",
+                                "version",
+                                "camera_model",
+                                "width",
+                                "height",
+                                "modulation_frequency_hz",
+                                "integration_time_us",
+                                "integration_time_register",
+                                "created_unix_s",
+                                "wall_distance_m",
+                                "wall_normal",
+                                "frames_averaged",
+                                "offset_m",
+                                "uncalibrated_pixels",
+                                "distance_correction"};
+  if (file_version >= 2) keys.insert({"exposure_offset_m_per_ms", "noise", "controller_setpoint"});
+  in.CheckKeys(root, keys, "calibration version " + std::to_string(file_version));
+  c.version = OffsetCalibration::kVersion;
   c.camera_model = in.String(in.Required(root, "camera_model"), "camera_model");
   c.width = static_cast<int>(in.Integer(in.Required(root, "width"), "width", 1, kMaxSide));
   c.height = static_cast<int>(in.Integer(in.Required(root, "height"), "height", 1, kMaxSide));
@@ -216,6 +254,61 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
   for (int k = 0; k < 3; ++k) c.wall_normal[k] = in.Double(normal[k], "wall_normal");
   c.frames_averaged = static_cast<int>(
       in.Integer(in.Required(root, "frames_averaged"), "frames_averaged", 0, 1 << 30));
+  if (file_version >= 2) {
+    const YAML::Node slope = in.Required(root, "exposure_offset_m_per_ms");
+    c.exposure_offset_m_per_ms = in.Double(slope, "exposure_offset_m_per_ms");
+    if (std::abs(c.exposure_offset_m_per_ms) > 0.1) {
+      in.Fail(slope, "exposure_offset_m_per_ms = " + Num(c.exposure_offset_m_per_ms) +
+                         " is beyond ±0.1 m/ms");
+    }
+  }
+  if (const YAML::Node noise = root["noise"]) {
+    in.CheckKeys(noise, {"delta_l_scale", "r_squared", "frames", "pixels_used"}, "noise");
+    NoiseCalibration n;
+    const YAML::Node scale = in.Required(noise, "delta_l_scale");
+    n.delta_l_scale = in.Double(scale, "noise.delta_l_scale");
+    if (!(n.delta_l_scale > 0.0 && n.delta_l_scale <= 1e6)) {
+      in.Fail(scale, "noise.delta_l_scale = " + Num(n.delta_l_scale) + " must be in (0, 1e6]");
+    }
+    n.r_squared = in.Double(in.Required(noise, "r_squared"), "noise.r_squared");
+    n.frames =
+        static_cast<int>(in.Integer(in.Required(noise, "frames"), "noise.frames", 0, 1 << 30));
+    n.pixels_used = static_cast<int>(
+        in.Integer(in.Required(noise, "pixels_used"), "noise.pixels_used", 0, 1 << 30));
+    c.noise = n;
+  }
+  if (const YAML::Node sp = root["controller_setpoint"]) {
+    in.CheckKeys(
+        sp,
+        {"target_intensity", "bias_register", "gain_register_per_intensity",
+         "amplitude_max_register", "amplitude_max_intensity", "intensity_per_register", "scene"},
+        "controller_setpoint");
+    ControllerSetpoint p;
+    const YAML::Node target = in.Required(sp, "target_intensity");
+    p.target_intensity = in.Double(target, "controller_setpoint.target_intensity");
+    if (!(p.target_intensity > 0.0 && p.target_intensity <= 65532.0)) {
+      in.Fail(target, "controller_setpoint.target_intensity = " + Num(p.target_intensity) +
+                          " must be in (0, 65532]");
+    }
+    p.bias_register = static_cast<int>(in.Integer(in.Required(sp, "bias_register"),
+                                                  "controller_setpoint.bias_register", 1, 65535));
+    const YAML::Node gain = in.Required(sp, "gain_register_per_intensity");
+    p.gain_register_per_intensity =
+        in.Double(gain, "controller_setpoint.gain_register_per_intensity");
+    if (!(p.gain_register_per_intensity >= 0.0 && p.gain_register_per_intensity <= 1.0)) {
+      in.Fail(gain, "controller_setpoint.gain_register_per_intensity = " +
+                        Num(p.gain_register_per_intensity) + " must be in [0, 1]");
+    }
+    p.amplitude_max_register =
+        static_cast<int>(in.Integer(in.Required(sp, "amplitude_max_register"),
+                                    "controller_setpoint.amplitude_max_register", 0, 65535));
+    p.amplitude_max_intensity = in.Double(in.Required(sp, "amplitude_max_intensity"),
+                                          "controller_setpoint.amplitude_max_intensity");
+    p.intensity_per_register = in.Double(in.Required(sp, "intensity_per_register"),
+                                         "controller_setpoint.intensity_per_register");
+    p.scene = in.String(in.Required(sp, "scene"), "controller_setpoint.scene");
+    c.controller_setpoint = std::move(p);
+  }
 
   const YAML::Node rows =
       in.Sequence(in.Required(root, "offset_m"), "offset_m", static_cast<std::size_t>(c.height));

@@ -173,6 +173,11 @@ ImportedSequence ImportIfmO3d3xx(const std::filesystem::path& h5_file) {
   seq.camera = io_internal::ImportedCameraInfo(
       "ifm O3D303",
       io_internal::FitPinhole(points, width, height, IfmNominalIntrinsics(width, height)), freq);
+  if (const std::optional<double> scale = SelfCalibratedNoiseScale(seq.frames)) {
+    seq.delta_l_scale = scale;
+    seq.delta_l_scale_note = "fitted at import from the temporal noise of the file's " +
+                             std::to_string(seq.frames.size()) + " frames";
+  }
   return seq;
 }
 

@@ -7,9 +7,11 @@
 #include <system_error>
 
 #include "import_util.h"
+#include "tofcam/accuracy/delta_l.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
+#include "tofcam/pipeline/metric_conversion.h"
 
 namespace tofcam {
 
@@ -475,6 +477,34 @@ ImportedSequence ImportFromSpec(const std::string& spec) {
 
 // ---------------------------------------------------------------------------------------------
 // ImportedCamera
+
+std::optional<double> SelfCalibratedNoiseScale(const std::vector<Frame>& frames) {
+  if (frames.size() < 3) return std::nullopt;
+  std::vector<MetricFrame> metric;
+  metric.reserve(frames.size());
+  for (const Frame& f : frames) {
+    if (f.width() != frames.front().width() || f.height() != frames.front().height()) {
+      return std::nullopt;
+    }
+    metric.push_back(ConvertToMetric(f));
+  }
+  try {
+    // No gate on R²: σ from 3 frames has a relative error of ~70 % per pixel, so R² is near 0
+    // even for a perfect model. A scene that moved inflates σ, hence the scale: the accuracy
+    // filter then rejects more, which fails safe.
+    // FitDeltaLScale's default cut (ΔL <= 0.3 m) leaves out pixels whose phase is nearly uniform
+    // at the SR-2's L = 7.49 m; in an importer's register convention L differs (ifm: 32.8 m), so
+    // the cut is taken at the same fraction of L (4 %).
+    DeltaLFitOptions options;
+    options.max_delta_l_m = 0.3 / UnambiguousRangeM(20e6) *
+                            UnambiguousRangeM(frames.front().info.modulation_frequency_hz);
+    const DeltaLScaleFit fit = FitDeltaLScale(metric, options);
+    if (!(fit.scale > 0.0) || !std::isfinite(fit.scale)) return std::nullopt;
+    return fit.scale;
+  } catch (const Error&) {
+    return std::nullopt;  // too few pixels usable in every frame
+  }
+}
 
 ImportedCamera::ImportedCamera(ImportedSequence sequence, bool loop)
     : sequence_(std::move(sequence)), loop_(loop) {

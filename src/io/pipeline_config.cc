@@ -2,10 +2,13 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -21,10 +24,20 @@ struct FlagMask {
   std::uint16_t& bits;
 };
 
+// A camera-specific value that ApplyMeasuredDefaults fills from measurements when the file does
+// not give it. The writer prints it commented out while it holds the default, so a printed
+// configuration read back does not pin the default over the camera's measured value.
+template <typename T>
+struct Measured {
+  T& value;
+  T default_value;
+};
+
 // One description of the file's layout, walked by both the writer and the reader, so the two
 // cannot disagree about a key, its section or its type.
 template <typename V>
 void VisitOptions(V& v, PipelineOptions& o) {
+  const PipelineOptions defaults;
   v.Section("metric_conversion", "Stage 1: registers to metres", [&] {
     v.Field("remove_distance_offset_register", o.metric.remove_distance_offset_register,
             "subtract the camera's distance-offset register before scaling");
@@ -34,7 +47,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
   });
   v.Section("accuracy", "Stage 3: predicted inaccuracy ΔL, eq. 2", [&] {
     v.Field("enabled", o.accuracy_enabled, "compute ΔL (the accuracy filter needs it)");
-    v.Field("scale", o.accuracy.scale, "factor on eq. 2, (0, 1e6]; 1 = the paper's formula");
+    v.Field("scale", Measured<double>{o.accuracy.scale, defaults.accuracy.scale},
+            "factor on eq. 2, (0, 1e6]; 1 = the paper's formula; left out: measured per camera");
     v.Field("intensity_per_amplitude", o.accuracy.intensity_per_amplitude,
             "I/A for sources without intensity, (0, 1e6]");
   });
@@ -83,11 +97,17 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");
     v.Field("kind", o.controller.kind,
             "may-proportional, may-incremental, vendor-histogram or fixed");
-    v.Field("target_intensity", o.controller.target_intensity, "I_A, register units, (0, 65532]");
-    v.Field("gain_register_per_intensity", o.controller.gain_register_per_intensity,
-            "V_p, registers per intensity unit, [0, 1]");
-    v.Field("bias_register", o.controller.bias_register,
-            "c_0, [min_register, max_register]; also the first frame's register");
+    v.Field("target_intensity",
+            Measured<double>{o.controller.target_intensity, defaults.controller.target_intensity},
+            "I_A, register units, (0, 65532]; left out: the calibration's set point");
+    v.Field("gain_register_per_intensity",
+            Measured<double>{o.controller.gain_register_per_intensity,
+                             defaults.controller.gain_register_per_intensity},
+            "V_p, registers per intensity unit, [0, 1]; left out: the calibration's set point");
+    v.Field("bias_register",
+            Measured<int>{o.controller.bias_register, defaults.controller.bias_register},
+            "c_0, [min_register, max_register]; also the first frame's register; left out: the "
+            "calibration's set point");
     v.Field("min_register", o.controller.min_register, "[1, max_register]");
     v.Field("max_register", o.controller.max_register, "[min_register, 65535]");
     v.Section("roi", "pixels the mean intensity is taken over; rows or cols 0 = whole image", [&] {
@@ -97,7 +117,9 @@ void VisitOptions(V& v, PipelineOptions& o) {
       v.Field("cols", o.controller.roi.cols, ">= 0");
     });
     v.Field("exclude_flags", FlagMask{o.controller.exclude_flags},
-            "pixels with these flags do not count");
+            "pixels with these flags do not count ...");
+    v.Field("clipped_intensity", o.controller.clipped_intensity,
+            "... unless their intensity is at least this (clipped), [0, 65532]; 0 = off");
     v.Field("percent_over_pos", o.controller.percent_over_pos,
             "vendor-histogram: % of pixels above x, [0, 100)");
     v.Field("desired_pos", o.controller.desired_pos, "vendor-histogram: 8-bit set point, [1, 255]");
@@ -171,6 +193,17 @@ class Writer {
   }
   void Field(const char* key, ControllerKind& value, const char* doc) {
     Scalar(key, std::string(ControllerKindName(value)), doc);
+  }
+  template <typename T>
+  void Field(const char* key, Measured<T> m, const char* doc) {
+    if (m.value != m.default_value) {
+      Field(key, m.value, doc);
+      return;
+    }
+    // Commented out: the default applies when nothing was measured.
+    const std::size_t at = text.size();
+    Field(key, m.value, doc);
+    text.insert(at + static_cast<std::size_t>(depth_) * 2, "# ");
   }
   void Field(const char* key, FlagMask mask, const char* doc) {
     std::string list;
@@ -266,6 +299,10 @@ class Reader {
     if (!node.IsScalar()) Fail(node, TypeMessage(key, "a string", node));
     value = node.Scalar();
   }
+  template <typename T>
+  void Field(const char* key, Measured<T> m, const char* doc) {
+    Field(key, m.value, doc);
+  }
   void Field(const char* key, ControllerKind& value, const char* /*doc*/) {
     const YAML::Node node = Lookup(key);
     if (!node) return;
@@ -315,9 +352,14 @@ class Reader {
     const YAML::Node& parent = nodes_.back();
     if (!parent || !parent.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
     const YAML::Node child = parent[key];
+    if (child && given_ != nullptr) given_->insert(Path(key));
     return child ? child : YAML::Node(YAML::NodeType::Undefined);
   }
 
+ public:
+  void RecordGivenKeys(std::set<std::string>* given) { given_ = given; }
+
+ private:
   std::string Path(const char* key) const {
     std::string out;
     for (const std::string& p : path_) out += p + ".";
@@ -341,12 +383,15 @@ class Reader {
   std::vector<YAML::Node> nodes_;
   std::vector<std::vector<std::string>> known_;
   std::vector<std::string> path_;
+  std::set<std::string>* given_ = nullptr;
 };
 
 }  // namespace
 
 PipelineOptions ParsePipelineConfig(std::string_view yaml_text, const std::string& source,
-                                    const std::filesystem::path& base_dir) {
+                                    const std::filesystem::path& base_dir,
+                                    std::set<std::string>* given_keys) {
+  if (given_keys != nullptr) given_keys->clear();
   YAML::Node root;
   try {
     root = YAML::Load(std::string(yaml_text));
@@ -360,6 +405,7 @@ PipelineOptions ParsePipelineConfig(std::string_view yaml_text, const std::strin
   }
   PipelineOptions options;
   Reader reader(root.IsMap() ? root : YAML::Node(), source);
+  reader.RecordGivenKeys(given_keys);
   VisitOptions(reader, options);
   reader.CheckUnknownKeys();
 
@@ -375,9 +421,10 @@ PipelineOptions ParsePipelineConfig(std::string_view yaml_text, const std::strin
   return options;
 }
 
-PipelineOptions LoadPipelineConfig(const std::filesystem::path& path) {
+PipelineOptions LoadPipelineConfig(const std::filesystem::path& path,
+                                   std::set<std::string>* given_keys) {
   const std::string text = ReadFile(path, std::size_t{1} << 20);
-  return ParsePipelineConfig(text, path.string(), path.parent_path());
+  return ParsePipelineConfig(text, path.string(), path.parent_path(), given_keys);
 }
 
 std::string PipelineConfigToYaml(const PipelineOptions& options) {
@@ -394,6 +441,55 @@ void LoadPipelineCalibration(PipelineOptions& options, const CameraInfo& camera)
     options.calibration = LoadCalibration(options.calibration_file);
   }
   if (options.calibration) CheckCalibrationMatches(*options.calibration, camera);
+}
+
+}  // namespace tofcam
+
+namespace tofcam {
+
+MeasuredDefaults ApplyMeasuredDefaults(PipelineOptions& options,
+                                       const std::set<std::string>& given_keys,
+                                       std::optional<double> source_delta_l_scale,
+                                       const std::string& source_note) {
+  MeasuredDefaults from;
+  const std::optional<OffsetCalibration>& c = options.calibration;
+  if (given_keys.count("accuracy.scale")) {
+    from.delta_l_scale = "the configuration (accuracy.scale)";
+  } else if (c && c->noise) {
+    options.accuracy.scale = c->noise->delta_l_scale;
+    from.delta_l_scale = "the calibration file's noise calibration (" +
+                         std::to_string(c->noise->frames) + " static frames)";
+  } else if (source_delta_l_scale && std::isfinite(*source_delta_l_scale) &&
+             *source_delta_l_scale > 0.0 && *source_delta_l_scale <= 1e6) {
+    options.accuracy.scale = *source_delta_l_scale;
+    from.delta_l_scale = source_note.empty() ? "the camera source" : source_note;
+  } else {
+    from.delta_l_scale = "the default (eq. 2 as printed); tofcam calibrate --noise measures it";
+  }
+  if (c && c->controller_setpoint) {
+    const ControllerSetpoint& p = *c->controller_setpoint;
+    bool used = false;
+    if (!given_keys.count("controller.target_intensity")) {
+      options.controller.target_intensity = p.target_intensity;
+      used = true;
+    }
+    if (!given_keys.count("controller.gain_register_per_intensity")) {
+      options.controller.gain_register_per_intensity = p.gain_register_per_intensity;
+      used = true;
+    }
+    if (!given_keys.count("controller.bias_register")) {
+      options.controller.bias_register = std::clamp(
+          p.bias_register, options.controller.min_register, options.controller.max_register);
+      used = true;
+    }
+    from.controller =
+        used ? "the calibration file's set point (integration-time sweep of '" + p.scene + "')"
+             : "the configuration";
+  } else {
+    from.controller = "the configuration or the defaults";
+  }
+  options.Validate();
+  return from;
 }
 
 }  // namespace tofcam

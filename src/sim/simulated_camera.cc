@@ -157,6 +157,10 @@ struct SimulatedCamera::Impl {
   std::vector<float> truth_distance;
   std::vector<float> taps[4];
   std::vector<float> tmp1, tmp2, tmp3;
+  // Per pixel of the current frame: noiseless offset plus read-noise variance (electrons), the
+  // denominator of the truth sigma, so blooming can add its charge to it.
+  std::vector<float> truth_noise_e2;
+  std::vector<float> bloom_mean;  // mean spilled charge per tap, electrons (blooming)
   std::vector<std::vector<RTCRayHit>> ray_buffers;  // per thread
   // Per object: its material's shading constants in float.
   struct ShadeMaterial {
@@ -274,6 +278,7 @@ struct SimulatedCamera::Impl {
       sm.emission = static_cast<float>(m.emission_w_m2_sr);
     }
     for (auto& t : taps) t.assign(np, 0.f);
+    truth_noise_e2.assign(np, 0.f);
   }
 
   static void WriteVertices(RTCGeometry g, const SceneObject& o, const Eigen::Isometry3d& pose) {
@@ -553,21 +558,43 @@ struct SimulatedCamera::Impl {
     }
   }
 
-  void Bloom(int k, double full_well) {
-    std::vector<float>& tap = taps[k];
+  // Over-full-well charge is charge, not light: it leaves the saturated pixel during the whole
+  // exposure and reaches a neighbour's photo-gate at times unrelated to the 20 MHz gate clock, so
+  // the neighbour's demodulation sorts it into its four taps equally on average. It therefore
+  // raises the neighbour's offset (intensity) but not its amplitude, and each electron lands
+  // independently, so every tap receives a Poisson count of it (when shot noise is on). That is
+  // the extra noise eq. 2 predicts from the raised intensity.
+  // Returns false (and leaves the taps alone) when no tap exceeds the full well; otherwise
+  // bloom_mean holds the mean spill per tap of every pixel.
+  bool Bloom(double full_well, std::uint64_t frame_seed, bool shot_noise) {
+    const std::size_t np = taps[0].size();
     bool any = false;
-    tmp1.assign(tap.size(), 0.f);
+    bloom_mean.assign(np, 0.f);
     const float fw = static_cast<float>(full_well);
     const float frac = static_cast<float>(model.blooming_fraction);
-    for (std::size_t i = 0; i < tap.size(); ++i) {
-      if (tap[i] > fw) {
-        tmp1[i] = frac * (tap[i] - fw);
+    for (std::size_t i = 0; i < np; ++i) {
+      float excess = 0;
+      for (const auto& tap : taps) excess += std::max(0.f, tap[i] - fw);
+      if (excess > 0) {
+        bloom_mean[i] = frac * excess / 4;  // per tap of the receiving pixel
         any = true;
       }
     }
-    if (!any) return;
-    BlurInPlace(tmp1, tmp2, width, height, model.blooming_sigma_px);
-    for (std::size_t i = 0; i < tap.size(); ++i) tap[i] += tmp1[i];
+    if (!any) return false;
+    BlurInPlace(bloom_mean, tmp2, width, height, model.blooming_sigma_px);
+    for (int r = 0; r < height; ++r) {
+      Rng rng(frame_seed ^ 0xB10060000000000Dull ^
+              (static_cast<std::uint64_t>(r) * 0xA24BAED4963EE407ull));
+      for (int c = 0; c < width; ++c) {
+        const std::size_t i = static_cast<std::size_t>(r) * width + c;
+        const float mean = bloom_mean[i];
+        if (!(mean > 0)) continue;
+        for (auto& tap : taps) {
+          tap[i] += shot_noise ? static_cast<float>(rng.Poisson(mean)) : mean;
+        }
+      }
+    }
+    return true;
   }
 };
 
@@ -831,12 +858,22 @@ std::optional<Frame> SimulatedCamera::Grab() {
             a_mean > 0 ? static_cast<float>(range * std::sqrt(b_mean + read_sigma * read_sigma) /
                                             (2 * std::sqrt(2.0) * kPi * a_mean))
                        : 0.f;
+        im.truth_noise_e2[p] = static_cast<float>(b_mean + read_sigma * read_sigma);
         truth.causes[p] = causes;
       }
     }
   });
   if (opt.saturation && opt.blooming && model.blooming_fraction > 0) {
-    for (int k = 0; k < 4; ++k) im.Bloom(k, full_well);
+    if (im.Bloom(full_well, frame_seed, opt.shot_noise)) {
+      // The spilled charge is offset without amplitude: it raises the true shot-noise sigma by
+      // sqrt((B + spill) / B) (B including the read-noise variance).
+      for (std::size_t p = 0; p < im.bloom_mean.size(); ++p) {
+        if (im.bloom_mean[p] > 0 && im.truth_noise_e2[p] > 0) {
+          truth.sigma_m[p] *=
+              std::sqrt((im.truth_noise_e2[p] + im.bloom_mean[p]) / im.truth_noise_e2[p]);
+        }
+      }
+    }
   }
   // Clip, demodulate and quantise.
   const double gain = model.gain_reg_per_e;

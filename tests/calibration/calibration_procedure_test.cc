@@ -2,14 +2,18 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "fake_wall_camera.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
+#include "tofcam/pipeline/metric_conversion.h"
 
 namespace tofcam {
 namespace {
@@ -27,6 +31,9 @@ WallCalibrationOptions FastOptions(double distance_m) {
   o.warmup_max_frames = 3000;
   // 2 mm/s: the fake's 20 s time constant gets there in under a minute of camera time.
   o.warmup_max_drift_m_per_s = 2e-3;
+  // The exposure-offset measurement has its own tests below; here it would add frames (and
+  // drift) after the averaging that the drift checks do not expect.
+  o.exposure_fractions = {};
   return o;
 }
 
@@ -300,6 +307,237 @@ TEST(SweepTest, RejectsBadOptions) {
   base.width = 41;
   base.offset_m = Image<float>(41, 31);
   EXPECT_EQ(code([](auto&) {}), ErrorCode::kMismatch);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+// A wall whose return needs a long integration time (register ~125), so the exposure
+// measurement spans 8..32 ms.
+FakeWallOptions DimWall(double exposure_offset_m_per_ms) {
+  FakeWallOptions fo;
+  fo.signal_per_register_at_1m = 300.0;
+  fo.exposure_offset_m_per_ms = exposure_offset_m_per_ms;
+  return fo;
+}
+
+TEST(ExposureOffsetTest, RecoversTheCamerasSlopeWithOneGlobalValue) {
+  FakeWallCamera camera(DimWall(0.0005));  // the simulated SR-2's 0.5 mm per ms
+  WallCalibrationOptions o = FastOptions(1.5);
+  o.exposure_fractions = {0.25, 0.5};
+  o.exposure_frames = 40;
+  std::set<std::string> phases;
+  WallCalibrationReport report;
+  const OffsetCalibration c = CalibrateOffsets(
+      camera, o, [&](const CalibrationProgress& p) { phases.insert(std::string(p.phase)); },
+      &report);
+  EXPECT_TRUE(phases.count("exposure-offset"));
+  ASSERT_EQ(report.exposure_registers.size(), 3u);
+  const int base = report.exposure_registers[0];
+  EXPECT_EQ(base, c.integration_time_register);
+  EXPECT_GT(base, 100);  // I = 300 reg / t^2 reaches the median 15872 near register 125
+  EXPECT_EQ(report.exposure_registers[1], static_cast<int>(std::lround(base * 0.25)));
+  EXPECT_EQ(report.exposure_registers[2], static_cast<int>(std::lround(base * 0.5)));
+  EXPECT_EQ(camera.IntegrationTimeRegister(), base);  // left at the calibration's register
+  // Slope noise: per-register means over 40 frames x 1240 pixels are good to 0.08-0.15 mm over
+  // a span of 24 ms, so s is known to ~0.006 mm/ms (1.3 %); 5 % is about 4 sigma.
+  EXPECT_NEAR(c.exposure_offset_m_per_ms, 0.0005, 0.05 * 0.0005);
+  EXPECT_DOUBLE_EQ(c.exposure_offset_m_per_ms, report.exposure_offset_m_per_ms);
+  // Shift at each register: s (t_k - t_cal), t = 255 us per register.
+  for (std::size_t k = 0; k < 3; ++k) {
+    const double expected = 0.0005 * (report.exposure_registers[k] - base) * 0.255;
+    EXPECT_NEAR(report.exposure_shift_m[k], expected, 4e-4) << k;
+  }
+  // The fake's shift is the same for every pixel: the per-pixel slopes scatter by exactly what
+  // their noise predicts (the sd is estimated from 1240 pixels, ~2 %; the prediction from
+  // per-pixel σ of 40 frames; 15 % covers both).
+  EXPECT_GT(report.exposure_pixels, 1200);
+  EXPECT_NEAR(report.exposure_pixel_slope_sd_m_per_ms / report.exposure_pixel_slope_noise_m_per_ms,
+              1.0, 0.15);
+}
+
+TEST(ExposureOffsetTest, CompensationRemovesTheShiftAtAnotherIntegrationTime) {
+  FakeWallCamera camera(DimWall(0.0005));
+  WallCalibrationOptions o = FastOptions(1.5);
+  o.exposure_fractions = {0.25, 0.5};
+  o.exposure_frames = 40;
+  const OffsetCalibration c = CalibrateOffsets(camera, o);
+  OffsetCalibration uncompensated = c;
+  uncompensated.exposure_offset_m_per_ms = 0.0;
+  // Frames at a quarter of the calibration's integration time: the camera reads
+  // 0.5 mm/ms x (t - t_cal) shorter, about -24 mm x 0.75 = -12 mm.
+  const int reg = c.integration_time_register / 4;
+  camera.SetIntegrationTimeRegister(reg);
+  const double expected_shift = 0.0005 * (reg - c.integration_time_register) * 0.255;
+  double with = 0.0, without = 0.0;
+  int n = 0;
+  for (int k = 0; k < 20; ++k) {
+    const MetricFrame m = ConvertToMetric(*camera.Grab());
+    const MetricFrame a = ApplyCalibration(m, c);
+    const MetricFrame b = ApplyCalibration(m, uncompensated);
+    for (int r = 0; r < 31; ++r) {
+      for (int col = 0; col < 40; ++col) {
+        with += a.radial_distance_m(r, col) - camera.TrueDistance(r, col);
+        without += b.radial_distance_m(r, col) - camera.TrueDistance(r, col);
+        ++n;
+      }
+    }
+  }
+  // Means over 24800 samples of ~33 mm noise: good to 0.2 mm, plus the offsets' own averaging
+  // noise (40 frames, ~0.1 mm in the mean).
+  EXPECT_NEAR(without / n, expected_shift, 1e-3);
+  EXPECT_LT(expected_shift, -0.008);
+  EXPECT_NEAR(with / n, 0.0, 1e-3);
+}
+
+TEST(ExposureOffsetTest, NotMeasuredWithoutOtherRegisters) {
+  FakeWallCamera camera(DimWall(0.0005));
+  WallCalibrationOptions o = FastOptions(1.5);
+  o.exposure_fractions = {1.0};  // the calibration register itself: nothing to compare
+  WallCalibrationReport report;
+  const OffsetCalibration c = CalibrateOffsets(camera, o, {}, &report);
+  EXPECT_EQ(c.exposure_offset_m_per_ms, 0.0);
+  EXPECT_EQ(report.exposure_registers.size(), 1u);
+  o.exposure_fractions = {0.0};
+  EXPECT_THROW((void)CalibrateOffsets(camera, o), Error);
+  o.exposure_fractions = {0.5};
+  o.exposure_frames = 0;
+  EXPECT_THROW((void)CalibrateOffsets(camera, o), Error);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+TEST(SweepIntegrationTimeTest, MeansMatchTheFakesRadiometry) {
+  FakeWallOptions fo;
+  fo.signal_per_register_at_1m = 3000.0;
+  FakeWallCamera camera(fo);
+  camera.SetIntegrationTimeRegister(7);
+  IntegrationSweepOptions o;
+  o.from_register = 10;
+  o.to_register = 50;
+  o.steps = 5;
+  const std::vector<IntegrationSweepPoint> points = SweepIntegrationTime(camera, o);
+  ASSERT_EQ(points.size(), 5u);
+  EXPECT_EQ(camera.IntegrationTimeRegister(), 7);  // left where it was
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const int reg = 10 + 10 * static_cast<int>(k);
+    EXPECT_EQ(points[k].integration_register, reg);
+    // The fake: I = 3000 reg / t^2 clipped at 65532, A = 0.4 x that signal (both rounded).
+    double i_sum = 0.0, a_sum = 0.0, sat = 0.0;
+    for (int r = 0; r < 31; ++r) {
+      for (int c = 0; c < 40; ++c) {
+        const double t = camera.TrueDistance(r, c);
+        const double signal = 3000.0 * reg / (t * t);
+        const double i = std::min(signal, 65532.0);
+        const double a = std::min(0.4 * signal, 65532.0);
+        i_sum += i;
+        a_sum += a;
+        sat += (i >= 65532.0 || i + a >= 64221.0) ? 1 : 0;
+      }
+    }
+    EXPECT_NEAR(points[k].mean_intensity, i_sum / 1240, 1.0) << reg;  // register rounding
+    EXPECT_NEAR(points[k].mean_amplitude, a_sum / 1240, 1.0) << reg;
+    EXPECT_NEAR(points[k].saturated_fraction, sat / 1240, 1e-9) << reg;
+  }
+  EXPECT_GT(points.back().saturated_fraction, 0.5);  // register 50 at 1.5 m: I ~ 66000
+  o.steps = 2;
+  EXPECT_THROW((void)SweepIntegrationTime(camera, o), Error);
+  o = IntegrationSweepOptions{};
+  o.from_register = 100;
+  o.to_register = 300;  // beyond the fake's 255
+  EXPECT_THROW((void)SweepIntegrationTime(camera, o), Error);
+}
+
+// A camera that ends after `frames` frames (a finite recording).
+class FiniteCamera final : public Camera {
+ public:
+  FiniteCamera(FakeWallCamera& inner, int frames) : inner_(inner), left_(frames) {}
+  std::optional<Frame> Grab() override {
+    if (left_ == 0) return std::nullopt;
+    --left_;
+    return inner_.Grab();
+  }
+  const CameraInfo& Info() const override { return inner_.Info(); }
+  void SetIntegrationTimeRegister(int reg) override { inner_.SetIntegrationTimeRegister(reg); }
+  int IntegrationTimeRegister() const override { return inner_.IntegrationTimeRegister(); }
+  void SetModulationFrequencyHz(double hz) override { inner_.SetModulationFrequencyHz(hz); }
+  void SetDistanceOffsetRegister(int reg) override { inner_.SetDistanceOffsetRegister(reg); }
+  int DistanceOffsetRegister() const override { return inner_.DistanceOffsetRegister(); }
+  void SetPanAngleRad(double a) override { inner_.SetPanAngleRad(a); }
+  double PanAngleRad() const override { return 0.0; }
+
+ private:
+  FakeWallCamera& inner_;
+  int left_;
+};
+
+TEST(CalibrateNoiseTest, RecoversTheFakesNoiseScale) {
+  FakeWallOptions fo;
+  fo.noise_scale = 2.0 / kPi;  // σ = 0.637 ΔL, ideal 4-tap sampling with unit gain
+  FakeWallCamera camera(fo);
+  camera.SetIntegrationTimeRegister(12);  // median intensity ~16000
+  DeltaLScaleFit fit;
+  std::set<std::string> phases;
+  const NoiseCalibration n = CalibrateNoise(
+      camera, {}, [&](const CalibrationProgress& p) { phases.insert(std::string(p.phase)); }, &fit);
+  EXPECT_EQ(phases, std::set<std::string>{"noise"});
+  EXPECT_EQ(n.frames, 30);
+  EXPECT_EQ(n.pixels_used, 1240);
+  EXPECT_EQ(n.delta_l_scale, fit.scale);
+  // 1240 pixels x 30 frames: the least-squares scale is good to ~1 %; 5 % is ~4 sigma.
+  EXPECT_NEAR(n.delta_l_scale, 2.0 / kPi, 0.05 * 2.0 / kPi);
+
+  // A finite source is used with the frames it had, but needs 3.
+  FiniteCamera five(camera, 5);
+  EXPECT_EQ(CalibrateNoise(five).frames, 5);
+  FiniteCamera two(camera, 2);
+  try {
+    (void)CalibrateNoise(two);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kIo);
+    EXPECT_NE(std::string(e.what()).find("delivered 2 frames"), std::string::npos) << e.what();
+  }
+  NoiseCalibrationOptions bad;
+  bad.frames = 2;
+  EXPECT_THROW((void)CalibrateNoise(camera, bad), Error);
+}
+
+TEST(GroundTruthNoiseScaleTest, LeastSquaresOnTheTruthSigma) {
+  // 4 x 4 pixels, A = 100 * (1 + k), I = 2.5 A: ΔL(scale 1) from eq. 2 by hand, truth σ = 0.2 ΔL
+  // except one pixel flagged kInvalid with a wild σ, which must be ignored.
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(4, 4, 2.0f);
+  m.amplitude = Image<float>(4, 4);
+  m.intensity = Image<float>(4, 4);
+  m.flags = Image<PixelFlags>(4, 4);
+  m.truth = GroundTruth{};
+  m.truth->sigma_m = Image<float>(4, 4);
+  const double range = UnambiguousRangeM(20e6);
+  for (std::size_t k = 0; k < 16; ++k) {
+    m.amplitude[k] = static_cast<float>(100.0 * (1 + k));
+    m.intensity[k] = 2.5f * m.amplitude[k];
+    const double delta_l =
+        range / std::sqrt(8.0) * std::sqrt(m.intensity[k]) / (2 * m.amplitude[k]);
+    m.truth->sigma_m[k] = static_cast<float>(0.2 * delta_l);
+  }
+  m.truth->sigma_m[3] = 5.0f;
+  m.flags[3] = PixelFlags(Flag::kInvalid);
+  const std::optional<double> scale = GroundTruthNoiseScale(m);
+  ASSERT_TRUE(scale.has_value());
+  EXPECT_NEAR(*scale, 0.2, 1e-6);  // float σ
+  DeltaLFitOptions strict;
+  strict.min_pixels = 16;  // only 15 usable
+  EXPECT_FALSE(GroundTruthNoiseScale(m, strict).has_value());
+  m.truth.reset();
+  EXPECT_FALSE(GroundTruthNoiseScale(m).has_value());
 }
 
 }  // namespace

@@ -66,6 +66,29 @@ TEST(CalibrationSimTest, WallCalibrationMatchesTheSimulatedFixedPattern) {
   EXPECT_GT(report.offset_rms_m, 0.01);  // the camera was visibly wrong before
 }
 
+TEST(CalibrationSimTest, ExposureOffsetMatchesTheSimulatorsSlope) {
+  auto camera = WallCamera(2.0, 5);
+  const double model_slope = sim::ResolveCameraModel("sr2").exposure_offset_m_per_ms;
+  WallCalibrationOptions o = Options(2.0);
+  o.exposure_frames = 20;
+  WallCalibrationReport report;
+  const OffsetCalibration c = CalibrateOffsets(*camera, o, {}, &report);
+  std::printf("exposure offset: %.4f mm/ms (simulator %.4f), registers",
+              c.exposure_offset_m_per_ms * 1e3, model_slope * 1e3);
+  for (std::size_t k = 0; k < report.exposure_registers.size(); ++k) {
+    std::printf(" %d: %+.2f mm", report.exposure_registers[k], report.exposure_shift_m[k] * 1e3);
+  }
+  std::printf("; per-pixel slope sd %.4f mm/ms, noise alone %.4f mm/ms\n",
+              report.exposure_pixel_slope_sd_m_per_ms * 1e3,
+              report.exposure_pixel_slope_noise_m_per_ms * 1e3);
+  ASSERT_GE(report.exposure_registers.size(), 2u);
+  // The simulator shifts every pixel by exposure_offset_m_per_ms x t. The mean over ~19000
+  // pixels of 20-frame averages is good to ~0.1 mm per register over a span of >= 8 ms
+  // (0.0125 mm/ms); 10 % of the model's 0.5 mm/ms allows for that and for the warm-up drift left
+  // between the round-robin frames.
+  EXPECT_NEAR(c.exposure_offset_m_per_ms, model_slope, 0.1 * std::abs(model_slope) + 2e-5);
+}
+
 TEST(CalibrationSimTest, SweepBringsHeldOutDistancesToTheNoiseLevel) {
   auto first = WallCamera(2.0, 2);
   const OffsetCalibration base = CalibrateOffsets(*first, Options(2.0));

@@ -27,11 +27,12 @@ struct FakeWallOptions {
   double noise_scale = 2.0 / kPi;  // σ = noise_scale * ΔL (ideal 4-tap sampling, gain 1)
   double drift_amplitude_m = 0.0;  // warm-up drift at open
   double drift_time_constant_s = 20.0;
-  double drift_linear_m_per_s = 0.0;  // a camera that never settles
-  double wiggle_amplitude_m = 0.0;    // sin(2π 4 t / L)
-  double constant_offset_m = 0.0;     // added to every pixel's pattern
-  bool pattern = true;                // bowl + pixel-to-pixel pattern
-  int blocked_columns = 0;            // leftmost columns return nothing (amplitude 0)
+  double drift_linear_m_per_s = 0.0;      // a camera that never settles
+  double wiggle_amplitude_m = 0.0;        // sin(2π 4 t / L)
+  double constant_offset_m = 0.0;         // added to every pixel's pattern
+  double exposure_offset_m_per_ms = 0.0;  // distance shift per ms of integration time
+  bool pattern = true;                    // bowl + pixel-to-pixel pattern
+  int blocked_columns = 0;                // leftmost columns return nothing (amplitude 0)
   std::uint64_t seed = 1;
 };
 
@@ -85,6 +86,8 @@ class FakeWallCamera final : public Camera {
     f.info.camera_model = info_.model;
     f.info.distance_offset_register = offset_register_;
     const double drift = Drift();
+    const double exposure_shift =
+        o_.exposure_offset_m_per_ms * info_.IntegrationTimeUs(register_) * 1e-3;
     for (int r = 0; r < h; ++r) {
       for (int c = 0; c < w; ++c) {
         if (c < o_.blocked_columns) continue;  // all registers 0: no return
@@ -93,8 +96,8 @@ class FakeWallCamera final : public Camera {
         const double intensity = std::min(signal + o_.background, 65532.0);
         const double amplitude = std::min(o_.contrast * signal, 65532.0);
         const double delta_l = range / std::sqrt(8.0) * std::sqrt(intensity) / (2.0 * amplitude);
-        double d =
-            t + TrueOffset(r, c) + Wiggle(t) + drift + o_.noise_scale * delta_l * normal_(rng_);
+        double d = t + TrueOffset(r, c) + Wiggle(t) + drift + exposure_shift +
+                   o_.noise_scale * delta_l * normal_(rng_);
         d = std::fmod(d, range);
         if (d < 0) d += range;
         const auto reg = static_cast<long>(std::lround(d / range * 65536.0)) + offset_register_;

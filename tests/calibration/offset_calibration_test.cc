@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <limits>
+#include <string>
 
 #include "tofcam/core/error.h"
 
@@ -139,8 +140,8 @@ TEST(OffsetCalibrationTest, ValidateNamesTheProblem) {
   c.width = 4;
   EXPECT_NE(message(c).find("header says 4x2"), std::string::npos);
   c = MakeCalibration(3, 2, 0.0f);
-  c.version = 2;
-  EXPECT_NE(message(c).find("version 2"), std::string::npos);
+  c.version = 3;
+  EXPECT_NE(message(c).find("version 3"), std::string::npos);
   c = MakeCalibration(3, 2, 0.0f);
   c.modulation_frequency_hz = 0.0;
   EXPECT_NE(message(c).find("modulation_frequency_hz"), std::string::npos);
@@ -155,6 +156,78 @@ TEST(OffsetCalibrationTest, ValidateNamesTheProblem) {
   c = MakeCalibration(3, 2, 0.0f);
   c.pixel_flags = Image<PixelFlags>(2, 2);
   EXPECT_NE(message(c).find("pixel_flags"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+TEST(ExposureOffsetTest, EquationOneWithTheExposureTermHandValues) {
+  OffsetCalibration c;
+  c.camera_model = "SR-2";
+  c.width = 3;
+  c.height = 1;
+  c.offset_m = Image<float>(3, 1, 0.0f);
+  c.integration_time_us = 5100.0;  // register 20 at 255 us
+  c.exposure_offset_m_per_ms = 0.0005;
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(3, 1, 0.0f);
+  m.amplitude = Image<float>(3, 1, 1000.0f);
+  m.intensity = Image<float>(3, 1, 5000.0f);
+  m.flags = Image<PixelFlags>(3, 1);
+  m.info.integration_time_us = 25500.0;  // register 100: t - t_cal = 20.4 ms -> 10.2 mm
+  m.radial_distance_m(0, 0) = 2.0f;
+  c.offset_m(0, 0) = 0.05f;  // 2.0 - 0.05 - 0.0102 = 1.9398
+  m.radial_distance_m(0, 1) = 0.005f;
+  c.offset_m(0, 1) = 0.0f;  // 0.005 - 0.0102 wraps: 7.49481145 - 0.0052 = 7.48961145
+  m.radial_distance_m(0, 2) = 3.0f;
+  m.flags(0, 2) = PixelFlags(Flag::kInvalid);  // untouched
+  EXPECT_NEAR(ExposureShiftM(c, 25500.0), 0.0102, 1e-12);
+  const MetricFrame l = ApplyCalibration(m, c);
+  EXPECT_NEAR(l.radial_distance_m(0, 0), 1.9398, 2e-6);
+  EXPECT_NEAR(l.radial_distance_m(0, 1), 7.48961145, 2e-6);
+  EXPECT_FLOAT_EQ(l.radial_distance_m(0, 2), 3.0f);
+
+  // At the calibration's own integration time, and when the frame's is unknown (0, e.g. an
+  // imported camera), the term vanishes: plain eq. 1.
+  for (const double t : {5100.0, 0.0}) {
+    m.info.integration_time_us = t;
+    EXPECT_EQ(ExposureShiftM(c, t), 0.0);
+    const MetricFrame same = ApplyCalibration(m, c);
+    EXPECT_NEAR(same.radial_distance_m(0, 0), 1.95, 2e-6) << t;
+    EXPECT_NEAR(same.radial_distance_m(0, 1), 0.005, 2e-6) << t;
+  }
+  // Shorter than at calibration: the camera read short, so the term adds distance.
+  m.info.integration_time_us = 1020.0;  // -4.08 ms -> -2.04 mm
+  EXPECT_NEAR(ApplyCalibration(m, c).radial_distance_m(0, 0), 1.95204, 2e-6);
+}
+
+TEST(ExposureOffsetTest, ValidatesTheSlopeAndAbsurdShifts) {
+  OffsetCalibration c;
+  c.camera_model = "SR-2";
+  c.width = 1;
+  c.height = 1;
+  c.offset_m = Image<float>(1, 1, 0.0f);
+  c.exposure_offset_m_per_ms = 0.2;  // beyond ±0.1 m/ms
+  EXPECT_THROW(c.Validate(), Error);
+  c.exposure_offset_m_per_ms = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(c.Validate(), Error);
+  c.exposure_offset_m_per_ms = 0.1;
+  EXPECT_NO_THROW(c.Validate());
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(1, 1, 1.0f);
+  m.amplitude = Image<float>(1, 1, 1000.0f);
+  m.flags = Image<PixelFlags>(1, 1);
+  m.info.integration_time_us = 30000.0;  // 0.1 m/ms x 30 ms = 3 m > L/4
+  try {
+    (void)ApplyCalibration(m, c);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("beyond L/4"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

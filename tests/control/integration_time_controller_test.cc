@@ -2,9 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <vector>
 
 #include "tofcam/core/error.h"
 
@@ -236,6 +238,136 @@ TEST(ControllerOptionsTest, RejectsOutOfRangeValues) {
   expect_bad([](ControllerOptions& o) { o.vendor_max_step_register = 0; });
   expect_bad([](ControllerOptions& o) { o.vendor_deadband = -1; });
   EXPECT_THROW(MayIncremental(Opts(ControllerKind::kMayIncremental, 2.0, 50)), Error);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+std::vector<IntegrationSweepPoint> Sweep(std::vector<int> regs, std::vector<double> intensity,
+                                         std::vector<double> amplitude) {
+  std::vector<IntegrationSweepPoint> s;
+  for (std::size_t k = 0; k < regs.size(); ++k) {
+    s.push_back({regs[k], intensity[k], amplitude[k], 0.0});
+  }
+  return s;
+}
+
+TEST(ChooseSetpointTest, HandComputedFromTheAmplitudeMaximum) {
+  // Amplitude peaks at register 30 (intensity 15000): I_A = 0.9 x 15000 = 13500, crossed between
+  // registers 20 (10000) and 30 (15000) at 20 + 10 x 3500 / 5000 = 27; k = 5000 / 10 = 500.
+  // V_p = min((27 - 1) / (65532 - 13500), 0.5 / 500) = 26 / 52032.
+  const auto sweep = Sweep({10, 20, 30, 40, 50}, {5000, 10000, 15000, 20000, 22000},
+                           {1000, 2000, 3000, 2500, 2000});
+  const ControllerSetpoint s = ChooseSetpoint(sweep);
+  EXPECT_EQ(s.amplitude_max_register, 30);
+  EXPECT_DOUBLE_EQ(s.amplitude_max_intensity, 15000.0);
+  EXPECT_DOUBLE_EQ(s.target_intensity, 13500.0);
+  EXPECT_EQ(s.bias_register, 27);
+  EXPECT_DOUBLE_EQ(s.intensity_per_register, 500.0);
+  EXPECT_DOUBLE_EQ(s.gain_register_per_intensity, 26.0 / 52032.0);
+  EXPECT_NO_THROW(s.Validate());
+
+  // A steep scene: the loop-gain bound wins. Peak at register 3 (30000): I_A = 27000 crossed at
+  // 2.7 -> c_0 = 3, k = 10000 per register; span rule 2 / 38532 = 5.19e-5 > 0.5 / 10000.
+  const ControllerSetpoint steep =
+      ChooseSetpoint(Sweep({1, 2, 3, 4}, {10000, 20000, 30000, 35000}, {1, 2, 3, 2}));
+  EXPECT_EQ(steep.bias_register, 3);
+  EXPECT_DOUBLE_EQ(steep.intensity_per_register, 10000.0);
+  EXPECT_DOUBLE_EQ(steep.gain_register_per_intensity, 0.5 / 10000.0);
+
+  // The peak at the first register: c_0 there.
+  const ControllerSetpoint first =
+      ChooseSetpoint(Sweep({5, 10, 15}, {20000, 30000, 40000}, {900, 800, 700}));
+  EXPECT_EQ(first.bias_register, 5);
+  EXPECT_DOUBLE_EQ(first.target_intensity, 18000.0);
+}
+
+TEST(ChooseSetpointTest, PrintedLawSettlesAtTheSetpointAndBacksOffFromABrightScene) {
+  // Plant: mean intensity I = k c with k = 500 per register (saturating at 65532); the mean
+  // amplitude grows until pixels start to saturate at register 60, then falls (paper fig. 3).
+  std::vector<IntegrationSweepPoint> sweep;
+  for (int c = 10; c <= 250; c += 10) {
+    sweep.push_back({c, std::min(500.0 * c, 65532.0), c <= 60 ? 4.0 * c : 240.0 - (c - 60.0), 0.0});
+  }
+  const ControllerSetpoint s = ChooseSetpoint(sweep);
+  EXPECT_EQ(s.amplitude_max_register, 60);
+  EXPECT_DOUBLE_EQ(s.target_intensity, 27000.0);  // 0.9 x 30000
+  EXPECT_EQ(s.bias_register, 54);                 // 27000 / 500
+  // min(53 / 38532, 0.5 / 500): the loop-gain bound.
+  EXPECT_DOUBLE_EQ(s.gain_register_per_intensity, 0.001);
+  const ControllerOptions o = s.Apply(ControllerOptions{});
+  EXPECT_EQ(o.kind, ControllerKind::kMayProportional);
+  const auto run = [&](auto plant, int frames) {
+    MayProportional p(o);
+    int c = o.bias_register;
+    for (int t = 0; t < frames; ++t) c = p.Update(Uniform(static_cast<float>(plant(c))));
+    return c;
+  };
+  // On the sweep's scene the printed law has no steady-state offset: c* = c_0.
+  EXPECT_EQ(run([](int c) { return 500.0 * c; }, 50), 54);
+  // Half the image saturated by something close (a hand): I = 32766 + 250 c. The fixed point of
+  // c = c_0 - V_p (I(c) - I_A) is (54 - 0.001 x 5766) / (1 + 0.25) = 38.6; the error shrinks by
+  // 0.25 per frame, so 50 frames end on the rounded fixed point.
+  EXPECT_NEAR(run([](int c) { return 32766.0 + 250.0 * c; }, 50), 38.6, 0.6);
+}
+
+TEST(ChooseSetpointTest, RejectsBadSweepsAndOptions) {
+  const auto good = Sweep({10, 20, 30}, {1000, 2000, 3000}, {1, 2, 3});
+  EXPECT_NO_THROW((void)ChooseSetpoint(good));
+  EXPECT_THROW((void)ChooseSetpoint(Sweep({10, 20}, {1, 2}, {1, 2})), Error);
+  EXPECT_THROW((void)ChooseSetpoint(Sweep({10, 10, 30}, {1, 2, 3}, {1, 2, 3})), Error);
+  EXPECT_THROW((void)ChooseSetpoint(Sweep({0, 10, 30}, {1, 2, 3}, {1, 2, 3})), Error);
+  EXPECT_THROW((void)ChooseSetpoint(
+                   Sweep({1, 2, 3}, {1, std::numeric_limits<double>::quiet_NaN(), 3}, {1, 2, 3})),
+               Error);
+  EXPECT_THROW((void)ChooseSetpoint(Sweep({1, 2, 3}, {1, 2, 3}, {1, -2, 3})), Error);
+  SetpointOptions o;
+  o.target_fraction = 0.0;
+  EXPECT_THROW((void)ChooseSetpoint(good, o), Error);
+  o = SetpointOptions{};
+  o.max_loop_gain = 1.0;
+  EXPECT_THROW((void)ChooseSetpoint(good, o), Error);
+  o = SetpointOptions{};
+  o.min_register = 0;
+  EXPECT_THROW((void)ChooseSetpoint(good, o), Error);
+  ControllerSetpoint bad;
+  bad.bias_register = 0;
+  EXPECT_THROW(bad.Validate(), Error);
+  bad = ControllerSetpoint{};
+  bad.gain_register_per_intensity = -1.0;
+  EXPECT_THROW(bad.Validate(), Error);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+TEST(ControllerTest, ClippedPixelsCountEvenWhenInvalid) {
+  // A SwissRanger pixel whose taps all clipped: amplitude 0 (so kInvalid) and full-scale
+  // intensity. It must count, or a saturated hand would be invisible to the controller.
+  MetricFrame m = Uniform(10000, 2, 2);
+  m.intensity(0, 0) = 65532;
+  m.flags(0, 0) = PixelFlags(Flag::kInvalid);
+  m.intensity(0, 1) = 60000;  // invalid for another reason: left out (below 64221)
+  m.flags(0, 1) = PixelFlags(Flag::kInvalid);
+  const auto invalid = static_cast<std::uint16_t>(Flag::kInvalid);
+  EXPECT_DOUBLE_EQ(MeanControlIntensity(m, {}, invalid, 64221.0), (65532.0 + 20000.0) / 3);
+  EXPECT_DOUBLE_EQ(MeanControlIntensity(m, {}, invalid), 10000.0);  // 0 = off: the old rule
+  // The controllers use ControllerOptions::clipped_intensity (default 64221): P-law with
+  // V_p = 0.001, c_0 = 50, I_A = 16000 on Ī = 85532 / 3 gives 50 - 0.001 (28510.7 - 16000).
+  MayProportional p(Opts(ControllerKind::kMayProportional, 0.001, 50));
+  EXPECT_EQ(p.Update(m), 37);
+  ControllerOptions off = Opts(ControllerKind::kMayProportional, 0.001, 50);
+  off.clipped_intensity = 0.0;
+  MayProportional q(off);
+  EXPECT_EQ(q.Update(m), 56);  // 50 - 0.001 (10000 - 16000)
+  off.clipped_intensity = 70000.0;
+  EXPECT_THROW(off.Validate(), Error);
 }
 
 }  // namespace

@@ -55,6 +55,17 @@ OffsetCalibration Sample() {
   c.pixel_flags = Image<PixelFlags>(5, 3);
   c.pixel_flags(2, 4) = PixelFlags(Flag::kInvalid);
   c.distance_correction = DistanceCorrection{0.5, 0.05, {0.01f, -0.0123456789f, 0.0f}};
+  c.exposure_offset_m_per_ms = 0.0009765625;
+  c.noise = NoiseCalibration{0.1875, 0.8125, 30, 19000};
+  ControllerSetpoint sp;
+  sp.target_intensity = 28531.25;
+  sp.bias_register = 151;
+  sp.gain_register_per_intensity = 0.00390625;
+  sp.amplitude_max_register = 168;
+  sp.amplitude_max_intensity = 31701.5;
+  sp.intensity_per_register = 189.5;
+  sp.scene = "sim:pavilion";
+  c.controller_setpoint = sp;
   return c;
 }
 
@@ -78,6 +89,25 @@ void ExpectSame(const OffsetCalibration& a, const OffsetCalibration& b) {
     EXPECT_EQ(a.distance_correction->step_m, b.distance_correction->step_m);
     EXPECT_EQ(a.distance_correction->correction_m, b.distance_correction->correction_m);
   }
+  EXPECT_EQ(a.exposure_offset_m_per_ms, b.exposure_offset_m_per_ms);
+  ASSERT_EQ(a.noise.has_value(), b.noise.has_value());
+  if (a.noise) {
+    EXPECT_EQ(a.noise->delta_l_scale, b.noise->delta_l_scale);
+    EXPECT_EQ(a.noise->r_squared, b.noise->r_squared);
+    EXPECT_EQ(a.noise->frames, b.noise->frames);
+    EXPECT_EQ(a.noise->pixels_used, b.noise->pixels_used);
+  }
+  ASSERT_EQ(a.controller_setpoint.has_value(), b.controller_setpoint.has_value());
+  if (a.controller_setpoint) {
+    const ControllerSetpoint &x = *a.controller_setpoint, &y = *b.controller_setpoint;
+    EXPECT_EQ(x.target_intensity, y.target_intensity);
+    EXPECT_EQ(x.bias_register, y.bias_register);
+    EXPECT_EQ(x.gain_register_per_intensity, y.gain_register_per_intensity);
+    EXPECT_EQ(x.amplitude_max_register, y.amplitude_max_register);
+    EXPECT_EQ(x.amplitude_max_intensity, y.amplitude_max_intensity);
+    EXPECT_EQ(x.intensity_per_register, y.intensity_per_register);
+    EXPECT_EQ(x.scene, y.scene);
+  }
 }
 
 TEST(CalibrationFileTest, RoundTripIsExact) {
@@ -89,6 +119,8 @@ TEST(CalibrationFileTest, RoundTripIsExact) {
   OffsetCalibration plain = Sample();
   plain.pixel_flags = Image<PixelFlags>();
   plain.distance_correction.reset();
+  plain.noise.reset();
+  plain.controller_setpoint.reset();
   SaveCalibration(p, plain);
   ExpectSame(LoadCalibration(p), plain);
   // Written atomically: no temporary file left beside the target.
@@ -101,9 +133,12 @@ TEST(CalibrationFileTest, FileIsTheDocumentedYaml) {
   const fs::path p = Temp("doc.yaml");
   SaveCalibration(p, Sample());
   const std::string text = ReadFile(p);
-  for (const char* key : {"format: tofcam-calibration", "version: 1", "camera_model: \"SR-2\"",
-                          "width: 5", "height: 3", "modulation_frequency_hz: 20000000",
-                          "uncalibrated_pixels: [[2, 4]]", "distance_correction:"}) {
+  for (const char* key :
+       {"format: tofcam-calibration", "version: 2", "camera_model: \"SR-2\"", "width: 5",
+        "height: 3", "modulation_frequency_hz: 20000000", "uncalibrated_pixels: [[2, 4]]",
+        "distance_correction:", "exposure_offset_m_per_ms: 0.0009765625",
+        "noise:", "delta_l_scale: 0.1875", "controller_setpoint:", "bias_register: 151",
+        "scene: \"sim:pavilion\""}) {
     EXPECT_NE(text.find(key), std::string::npos) << key << "\n" << text;
   }
 }
@@ -152,8 +187,26 @@ void ExpectRejected(const std::string& from, const std::string& to, const std::s
 TEST(CalibrationFileTest, RejectsEveryMalformedField) {
   ExpectRejected("format: tofcam-calibration", "format: something-else", "format is");
   ExpectRejected("format: tofcam-calibration\n", "", "missing key 'format'");
-  ExpectRejected("version: 1", "version: 2", "unsupported version 2");
-  ExpectRejected("version: 1", "version: one", "not an integer");
+  ExpectRejected("version: 2", "version: 3", "unsupported version 3");
+  ExpectRejected("version: 2", "version: 0", "unsupported version 0");
+  ExpectRejected("version: 2", "version: one", "not an integer");
+  // Version 1 files cannot carry the version-2 keys (the Sample has all of them).
+  ExpectRejected("version: 2", "version: 1", "unknown key 'exposure_offset_m_per_ms'");
+  ExpectRejected("exposure_offset_m_per_ms: 0.0009765625\n", "",
+                 "missing key 'exposure_offset_m_per_ms'");
+  ExpectRejected("exposure_offset_m_per_ms: 0.0009765625", "exposure_offset_m_per_ms: 0.5",
+                 "beyond ±0.1 m/ms");
+  ExpectRejected("exposure_offset_m_per_ms: 0.0009765625", "exposure_offset_m_per_ms: nan",
+                 "not finite");
+  ExpectRejected("delta_l_scale: 0.1875", "delta_l_scale: 0", "must be in (0, 1e6]");
+  ExpectRejected("delta_l_scale: 0.1875", "delta_l_scale: -1", "must be in (0, 1e6]");
+  ExpectRejected("  delta_l_scale: 0.1875\n", "", "missing key 'delta_l_scale'");
+  ExpectRejected("pixels_used: 19000", "pixels_used: 19000\n  sigma: 1", "unknown key 'sigma'");
+  ExpectRejected("bias_register: 151", "bias_register: 0", "bias_register = 0 is outside");
+  ExpectRejected("target_intensity: 28531.25", "target_intensity: 70000", "(0, 65532]");
+  ExpectRejected("gain_register_per_intensity: 0.00390625", "gain_register_per_intensity: 2",
+                 "must be in [0, 1]");
+  ExpectRejected("  scene: \"sim:pavilion\"\n", "", "missing key 'scene'");
   ExpectRejected("width: 5", "width: 0", "width = 0 is outside");
   ExpectRejected("width: 5", "width: 4", "offset_m row 0 has 5 entries, expected 4");
   ExpectRejected("width: 5", "width: 100000", "width = 100000 is outside");
@@ -184,6 +237,30 @@ TEST(CalibrationFileTest, RejectsEveryMalformedField) {
   ExpectRejected("step_m: 0.050000000000000003", "step_m: 0.05\n  extra: 1", "unknown key 'extra'");
   ExpectRejected("correction_m: [", "correction_m: [nan, ", "not finite");
   ExpectRejected("format: tofcam-calibration", "format: [unclosed", "not valid YAML");
+}
+
+TEST(CalibrationFileTest, VersionOneFilesLoadWithoutExposureCompensation) {
+  // A version-1 file as the previous build wrote it: no exposure offset, noise or set point.
+  OffsetCalibration v1 = Sample();
+  v1.exposure_offset_m_per_ms = 0.0;
+  v1.noise.reset();
+  v1.controller_setpoint.reset();
+  const fs::path p = Temp("v1.yaml");
+  SaveCalibration(p, v1);
+  std::string text = ReadFile(p);
+  for (const auto& [from, to] : {std::pair<std::string, std::string>{"version: 2", "version: 1"},
+                                 {"exposure_offset_m_per_ms: 0\n", ""}}) {
+    const auto at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from << "\n" << text;
+    text.replace(at, from.size(), to);
+  }
+  WriteFileAtomically(p, text);
+  const OffsetCalibration loaded = LoadCalibration(p);
+  EXPECT_EQ(loaded.version, OffsetCalibration::kVersion);  // upgraded in memory
+  EXPECT_EQ(loaded.exposure_offset_m_per_ms, 0.0);
+  EXPECT_FALSE(loaded.noise.has_value());
+  EXPECT_FALSE(loaded.controller_setpoint.has_value());
+  ExpectSame(loaded, v1);
 }
 
 TEST(CalibrationFileTest, RejectsNonMappingsAndEmptyFiles) {

@@ -9,13 +9,16 @@
 #include <filesystem>
 #include <fstream>
 #include <numeric>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
+#include "tofcam/io/pipeline_config.h"
 #include "tofcam/io/png.h"
+#include "tofcam/pipeline/pipeline.h"
 
 namespace tofcam {
 namespace {
@@ -488,6 +491,100 @@ TEST(ImportedCamera, ServesFramesInOrderAndLoops) {
   EXPECT_EQ(CodeOf([&] { looping.SetIntegrationTimeRegister(5); }), ErrorCode::kUnsupported);
   EXPECT_EQ(CodeOf([&] { looping.SetModulationFrequencyHz(20e6); }), ErrorCode::kUnsupported);
   EXPECT_EQ(CodeOf([] { ImportedCamera empty(ImportedSequence{}); }), ErrorCode::kFormat);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+// ΔL of eq. 2 with scale 1 in the amplitude-only form (I = 2.5 A), written out independently of
+// ComputeDeltaL: L / sqrt(8) * sqrt(2.5 A) / (2 A).
+double DeltaLAmplitudeOnly(double range_m, double amplitude) {
+  return range_m / std::sqrt(8.0) * std::sqrt(2.5 * amplitude) / (2.0 * amplitude);
+}
+
+TEST(IfmO3d3xx, NoiseScaleMatchesTheMeasuredTemporalSigma) {
+  const ImportedSequence seq = ImportIfmO3d3xx(kReal / "ifm_o3d303" / "o3d3xx.h5");
+  ASSERT_TRUE(seq.delta_l_scale.has_value());
+  EXPECT_NE(seq.delta_l_scale_note.find("3 frames"), std::string::npos) << seq.delta_l_scale_note;
+  const double scale = *seq.delta_l_scale;
+  const double range = kImportRangeIfmM;
+  // Per pixel: temporal σ over the 3 frames (sample, about the mean; the 32.8 m range never
+  // wraps here) and ΔL from the mean amplitude.
+  std::vector<double> sigma, delta;
+  const std::size_t n = seq.frames[0].distance.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    double s = 0, ss = 0, amp = 0;
+    bool ok = true;
+    for (const Frame& f : seq.frames) {
+      ok = ok && f.source_flags[i].Valid() && f.amplitude[i] > 0;
+      const double m = Metres(f, i);
+      s += m, ss += m * m, amp += f.amplitude[i];
+    }
+    if (!ok) continue;
+    sigma.push_back(std::sqrt(std::max(0.0, (ss - s * s / 3) / 2)));
+    delta.push_back(DeltaLAmplitudeOnly(range, amp / 3));
+  }
+  ASSERT_GT(sigma.size(), 15000u);
+  // Rank: ΔL orders the pixels by their noise. σ from 3 frames has a relative error of ~50 %,
+  // which caps the rank correlation well below 1 even for a perfect model (0.78 measured).
+  EXPECT_GT(Spearman(sigma, delta), 0.7);
+  // Ratio: per decile of ΔL, the RMS of the measured σ against the scaled prediction. Each
+  // decile pools ~2000 pixels, so its RMS σ is good to ~2 %. The tolerances are for the shape of
+  // the model, not for noise: the amplitude-only form predicts σ ∝ 1/sqrt(A), the O3D303's σ falls
+  // faster with amplitude (10x from the dimmest to the brightest decile where the model says
+  // 5.4x), so one scale fits one end. The least-squares fit on σ² matches the dim end, where the
+  // 7 cm threshold acts: deciles 8-10 within 25 %; the bright end is over-predicted (the filter
+  // errs on the safe side there) by at most 2.2x.
+  std::vector<std::size_t> order(delta.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::sort(order.begin(), order.end(), [&](auto a, auto b) { return delta[a] < delta[b]; });
+  for (int d = 0; d < 10; ++d) {
+    const std::size_t a = order.size() * d / 10, b = order.size() * (d + 1) / 10;
+    double s2 = 0, p2 = 0;
+    for (std::size_t k = a; k < b; ++k) {
+      s2 += sigma[order[k]] * sigma[order[k]];
+      p2 += scale * scale * delta[order[k]] * delta[order[k]];
+    }
+    const double ratio = std::sqrt(s2 / p2);
+    std::printf("decile %d: predicted %.2f mm, measured %.2f mm, ratio %.2f\n", d + 1,
+                std::sqrt(p2 / (b - a)) * 1e3, std::sqrt(s2 / (b - a)) * 1e3, ratio);
+    EXPECT_GT(ratio, d >= 7 ? 0.8 : 1 / 2.2) << "decile " << d + 1;
+    EXPECT_LT(ratio, d >= 7 ? 1.25 : 1.0) << "decile " << d + 1;
+  }
+}
+
+TEST(IfmO3d3xx, DefaultPipelineKeepsASensibleFraction) {
+  // `tofcam run --camera import:ifm-o3d3xx:...` with defaults: the importer's noise scale turns
+  // ΔL into metres, so the paper's 7 cm threshold keeps the pixels whose predicted σ is below
+  // 7 cm. The README measured a median σ of 14 mm even below amplitude 100, so nearly every pixel
+  // the camera itself marks valid must stay; with the paper's scale 1 in this register convention
+  // (L = 32.8 m) none did.
+  ImportedCamera camera(ImportIfmO3d3xx(kReal / "ifm_o3d303" / "o3d3xx.h5"));
+  const auto kept_fraction = [&](std::optional<double> scale) {
+    ImportedCamera cam(ImportIfmO3d3xx(kReal / "ifm_o3d303" / "o3d3xx.h5"));
+    PipelineOptions options;
+    (void)ApplyMeasuredDefaults(options, {}, scale, "importer");
+    Pipeline pipeline(options, cam.Info());
+    double kept = 0, source_valid = 0;
+    while (std::optional<Frame> f = cam.Grab()) {
+      const PipelineResult r = pipeline.Process(*f);
+      for (std::size_t i = 0; i < r.frame.flags.size(); ++i) {
+        if (!f->source_flags[i].Valid()) continue;
+        ++source_valid;
+        kept += r.frame.flags[i].Valid() ? 1 : 0;
+      }
+    }
+    return kept / source_valid;
+  };
+  const double with_scale = kept_fraction(camera.delta_l_scale());
+  const double paper_scale = kept_fraction(std::nullopt);
+  std::printf("kept %.1f %% of the camera's valid pixels (%.1f %% with scale 1)\n",
+              with_scale * 100, paper_scale * 100);
+  EXPECT_GT(with_scale, 0.9);
+  EXPECT_LT(paper_scale, 0.01);
 }
 
 }  // namespace

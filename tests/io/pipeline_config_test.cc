@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <string>
 
 #include "tofcam/core/error.h"
@@ -61,6 +62,7 @@ void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(ca.roi.rows, cb.roi.rows);
   EXPECT_EQ(ca.roi.cols, cb.roi.cols);
   EXPECT_EQ(ca.exclude_flags, cb.exclude_flags);
+  EXPECT_EQ(ca.clipped_intensity, cb.clipped_intensity);
   EXPECT_EQ(ca.percent_over_pos, cb.percent_over_pos);
   EXPECT_EQ(ca.desired_pos, cb.desired_pos);
   EXPECT_EQ(ca.vendor_gain, cb.vendor_gain);
@@ -117,6 +119,7 @@ PipelineOptions Unusual() {
   o.controller.max_register = 200;
   o.controller.roi = {10, 20, 30, 40};
   o.controller.exclude_flags = (PixelFlags(Flag::kInvalid) | Flag::kSaturated).bits();
+  o.controller.clipped_intensity = 60000.5;
   o.controller.percent_over_pos = 12.5;
   o.controller.desired_pos = 60;
   o.controller.vendor_gain = 0.75;
@@ -261,6 +264,79 @@ TEST_F(PipelineConfigFileTest, MissingCalibrationFileIsNotFound) {
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::kNotFound);
   }
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+OffsetCalibration Measured() {
+  OffsetCalibration c;
+  c.camera_model = "SR-2";
+  c.width = 2;
+  c.height = 2;
+  c.offset_m = Image<float>(2, 2, 0.0f);
+  c.noise = NoiseCalibration{0.25, 0.8, 30, 4};
+  ControllerSetpoint p;
+  p.target_intensity = 25000.0;
+  p.bias_register = 130;
+  p.gain_register_per_intensity = 0.0025;
+  p.scene = "sim:pavilion";
+  c.controller_setpoint = p;
+  return c;
+}
+
+TEST(MeasuredDefaultsTest, CalibrationThenSourceThenDefaultAndExplicitKeysWin) {
+  // Nothing measured: the paper's scale 1 and the controller defaults stay.
+  std::set<std::string> given;
+  PipelineOptions plain = ParsePipelineConfig("", "empty", {}, &given);
+  EXPECT_TRUE(given.empty());
+  MeasuredDefaults from = ApplyMeasuredDefaults(plain, given);
+  EXPECT_EQ(plain.accuracy.scale, 1.0);
+  EXPECT_NE(from.delta_l_scale.find("default"), std::string::npos);
+  EXPECT_EQ(plain.controller.target_intensity, 16000.0);
+
+  // The source's figure when the calibration has none.
+  from = ApplyMeasuredDefaults(plain, given, 0.0157, "the importer");
+  EXPECT_EQ(plain.accuracy.scale, 0.0157);
+  EXPECT_EQ(from.delta_l_scale, "the importer");
+
+  // The calibration's measurements beat the source's.
+  PipelineOptions o;
+  o.calibration = Measured();
+  from = ApplyMeasuredDefaults(o, given, 0.0157, "the importer");
+  EXPECT_EQ(o.accuracy.scale, 0.25);
+  EXPECT_NE(from.delta_l_scale.find("noise calibration"), std::string::npos);
+  EXPECT_EQ(o.controller.target_intensity, 25000.0);
+  EXPECT_EQ(o.controller.bias_register, 130);
+  EXPECT_EQ(o.controller.gain_register_per_intensity, 0.0025);
+  EXPECT_NE(from.controller.find("sim:pavilion"), std::string::npos);
+
+  // A printed default configuration read back pins none of the measured values: they are
+  // printed commented out while they hold the default.
+  const std::string printed = PipelineConfigToYaml(PipelineOptions{});
+  EXPECT_NE(printed.find("  # scale: 1.0"), std::string::npos) << printed;
+  EXPECT_NE(printed.find("  # bias_register: 40"), std::string::npos) << printed;
+  (void)ParsePipelineConfig(printed, "printed", {}, &given);
+  for (const char* key : {"accuracy.scale", "controller.target_intensity",
+                          "controller.gain_register_per_intensity", "controller.bias_register"}) {
+    EXPECT_EQ(given.count(key), 0u) << key;
+  }
+  EXPECT_EQ(given.count("filters.accuracy.max_delta_l_m"), 1u);
+
+  // Keys the configuration gives are never replaced.
+  PipelineOptions explicit_keys = ParsePipelineConfig(
+      "accuracy:\n  scale: 0.5\ncontroller:\n  bias_register: 60\n", "conf", {}, &given);
+  EXPECT_EQ(given, (std::set<std::string>{"accuracy", "accuracy.scale", "controller",
+                                          "controller.bias_register"}));
+  explicit_keys.calibration = Measured();
+  from = ApplyMeasuredDefaults(explicit_keys, given, 0.0157, "the importer");
+  EXPECT_EQ(explicit_keys.accuracy.scale, 0.5);
+  EXPECT_NE(from.delta_l_scale.find("configuration"), std::string::npos);
+  EXPECT_EQ(explicit_keys.controller.bias_register, 60);
+  EXPECT_EQ(explicit_keys.controller.target_intensity, 25000.0);  // not given: measured
 }
 
 }  // namespace

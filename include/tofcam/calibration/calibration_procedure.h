@@ -11,10 +11,12 @@
 
 #include <array>
 #include <functional>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "tofcam/accuracy/delta_l.h"
 #include "tofcam/calibration/offset_calibration.h"
 #include "tofcam/control/integration_time_controller.h"
 #include "tofcam/core/camera.h"
@@ -23,10 +25,12 @@ namespace tofcam {
 
 /// One progress report; the library never prints, a CLI may.
 struct CalibrationProgress {
-  std::string_view phase;  ///< "exposure", "warm-up", "averaging", "sweep" or "held-out".
-  int frame = 0;           ///< Frames taken in this phase so far.
-  int total = 0;           ///< Frames the phase needs at most (upper bound for "warm-up").
-  std::string message;     ///< One human-readable line.
+  /// "exposure", "warm-up", "averaging", "exposure-offset", "sweep", "held-out",
+  /// "integration-sweep" or "noise".
+  std::string_view phase;
+  int frame = 0;        ///< Frames taken in this phase so far.
+  int total = 0;        ///< Frames the phase needs at most (upper bound for "warm-up").
+  std::string message;  ///< One human-readable line.
 };
 using ProgressCallback = std::function<void(const CalibrationProgress&)>;
 
@@ -68,6 +72,15 @@ struct WallCalibrationOptions {
   /// does not fill the view, or the camera is blocked), [0, 1].
   double max_uncalibrated_fraction = 0.1;
 
+  /// Exposure offset: after the averaging, the wall is also measured at these fractions of the
+  /// calibration's register (rounded, clamped to the camera's range, duplicates dropped), each
+  /// in (0, 4]; lower fractions by default, because the controller put the wall near the
+  /// saturation-free maximum. Empty (or no distinct register) = not measured, s = 0.
+  std::vector<double> exposure_fractions = {0.25, 0.5};
+  /// Frames per integration time for the exposure offset, taken round-robin (one frame per
+  /// register in turn) so that any remaining warm-up drift hits every register alike, [1, 100000].
+  int exposure_frames = 20;
+
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;
 };
@@ -84,15 +97,32 @@ struct WallCalibrationReport {
   /// Mean per-pixel temporal σ of one frame, m (circular standard deviation). The offset of a
   /// pixel is known to about noise_sigma_m / sqrt(frames).
   double noise_sigma_m = 0.0;
+
+  /// Exposure offset s, m/ms: least-squares slope of the mean (over pixels valid at every
+  /// register) distance change against the integration time. 0 when not measured.
+  double exposure_offset_m_per_ms = 0.0;
+  /// Registers of the exposure measurement (the calibration's first) and the mean shift at each
+  /// against the calibration's register, m.
+  std::vector<int> exposure_registers;
+  std::vector<double> exposure_shift_m;
+  /// Spread (standard deviation over pixels) of the per-pixel slopes, m/ms, and the part of it
+  /// the per-pixel noise alone explains: when the two agree, one global s is all there is.
+  double exposure_pixel_slope_sd_m_per_ms = 0.0;
+  double exposure_pixel_slope_noise_m_per_ms = 0.0;
+  int exposure_pixels = 0;  ///< Pixels used for s.
 };
 
 /// Runs the paper's calibration on `camera` facing a flat wall: distance-offset register to 0,
 /// integration time set by the controller, warm-up until the drift settles, then `frames` frames
 /// averaged per pixel as phasors (so the 0 / L seam cannot bias the mean) and stored as
-/// measured minus true radial distance, wrapped into [-L/2, L/2). The camera keeps the
-/// calibration's integration time. Throws Error(kInvalidArgument) for bad options or when the
-/// controller or the warm-up does not settle, Error(kMismatch) when too few pixels see the wall,
-/// Error(kIo) when the camera stops delivering frames, and passes on the camera's errors.
+/// measured minus true radial distance, wrapped into [-L/2, L/2); then the exposure offset s
+/// (OffsetCalibration::exposure_offset_m_per_ms) from the wall at the `exposure_fractions` of
+/// the register. One global s rather than one per pixel: the shift is a property of the
+/// modulation electronics, and a per-pixel slope from two integration times would carry the noise
+/// of two averages (see the report's pixel-slope spread, docs/calibration.md). The camera is left
+/// at the calibration's integration time. Throws Error(kInvalidArgument) for bad options or when
+/// the controller or the warm-up does not settle, Error(kMismatch) when too few pixels see the
+/// wall, Error(kIo) when the camera stops delivering frames, and passes on the camera's errors.
 [[nodiscard]] OffsetCalibration CalibrateOffsets(Camera& camera,
                                                  const WallCalibrationOptions& options,
                                                  const ProgressCallback& progress = {},
@@ -152,15 +182,66 @@ struct SweepReport {
 };
 
 /// The wall sweep: for each distance, `source(distance)`, exposure settled by the controller,
-/// frames averaged as phasors; then g(l) (bin averages of the residual over the eq.-1-corrected
-/// distance, Catmull-Rom between knots) alternated with per-pixel offset refinement. Returns
-/// `base` with refined offsets and the correction. Throws Error(kInvalidArgument) for bad
-/// options, Error(kMismatch) when a camera does not fit `base`, and the camera's errors.
+/// frames averaged as phasors and moved to the calibration's integration time with `base`'s
+/// exposure offset (so g holds no exposure-dependent part); then g(l) (bin averages of the residual
+/// over the eq.-1-corrected distance, Catmull-Rom between knots) alternated with per-pixel offset
+/// refinement. Returns `base` with refined offsets and the correction. Throws
+/// Error(kInvalidArgument) for bad options, Error(kMismatch) when a camera does not fit `base`, and
+/// the camera's errors.
 [[nodiscard]] OffsetCalibration CalibrateDistanceCorrection(const OffsetCalibration& base,
                                                             const WallCameraSource& source,
                                                             const SweepOptions& options,
                                                             const ProgressCallback& progress = {},
                                                             SweepReport* report = nullptr);
+
+/// The integration-time sweep of paper fig. 3 on the scene the camera looks at.
+struct IntegrationSweepOptions {
+  /// Registers from_register, from_register + step, ... up to to_register (always included);
+  /// 0 = the camera's minimum / maximum. Within the camera's range, from < to.
+  int from_register = 0;
+  int to_register = 0;
+  int steps = 32;  ///< Number of registers, [3, 1000] (fewer when the range is shorter).
+  /// Frames grabbed per register; the last is measured (a real camera may deliver one frame at
+  /// the old setting). [1, 100].
+  int frames_per_step = 1;
+
+  /// Throws Error(kInvalidArgument) naming the field.
+  void Validate() const;
+};
+
+/// Sweeps the integration time over the options' registers and returns, per register, the
+/// frame's mean intensity (amplitude without an intensity channel), mean amplitude and saturated
+/// fraction over the pixels without kInvalid (saturated pixels count: their collapsed amplitude
+/// is what makes the amplitude maximum). The camera is left at its previous register. Throws
+/// Error(kInvalidArgument) for bad options and Error(kIo) when the camera stops delivering.
+[[nodiscard]] std::vector<IntegrationSweepPoint> SweepIntegrationTime(
+    Camera& camera, const IntegrationSweepOptions& options = {},
+    const ProgressCallback& progress = {});
+
+/// The noise calibration of stage 3 on a camera looking at a static scene.
+struct NoiseCalibrationOptions {
+  /// Frames grabbed, [3, 100000]; a finite source (recording, import) that ends earlier is used
+  /// with the frames it had (at least 3).
+  int frames = 30;
+  DeltaLFitOptions fit;  ///< Passed to FitDeltaLScale.
+
+  void Validate() const;
+};
+
+/// Grabs static frames at the camera's current integration time and fits the ΔL scale
+/// (FitDeltaLScale). Throws Error(kInvalidArgument) for bad options or too few usable pixels,
+/// Error(kIo) when a source ends before 3 frames. `fit` receives the full fit when not null.
+[[nodiscard]] NoiseCalibration CalibrateNoise(Camera& camera,
+                                              const NoiseCalibrationOptions& options = {},
+                                              const ProgressCallback& progress = {},
+                                              DeltaLScaleFit* fit = nullptr);
+
+/// The noise scale a simulator's ground truth gives for one frame: least squares of the true
+/// per-pixel σ² (GroundTruth::sigma_m) on ΔL² of eq. 2 with scale 1, through the origin, over
+/// pixels without reject flags, with σ > 0 and ΔL <= options.max_delta_l_m (as FitDeltaLScale).
+/// nullopt when the frame has no truth σ or fewer than options.min_pixels such pixels.
+[[nodiscard]] std::optional<double> GroundTruthNoiseScale(const MetricFrame& frame,
+                                                          const DeltaLFitOptions& options = {});
 
 /// True radial distance (m) of every pixel to the wall plane (+inf where the ray misses it).
 [[nodiscard]] Image<float> WallRadialDistance(const CameraIntrinsics& intrinsics,

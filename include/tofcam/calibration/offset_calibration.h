@@ -9,12 +9,19 @@
 /// distance-dependent correction (a lookup table over the eq.-1-corrected distance, fitted on a
 /// wall sweep) then removes the periodic "wiggling" error:
 ///     l' = (l - g(l) + r_e) mod r_e.
+///
+/// Exposure offset (format version 2): the distance a camera reports shifts slightly with the
+/// integration time t, while the offsets are measured at one integration time t_cal. With the
+/// measured slope s (m/ms) eq. 1 becomes, per frame,
+///     l = (m - o - s (t - t_cal) + r_e) mod r_e,
+/// i.e. a per-frame scalar folded into the per-pixel offset.
 
 #include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "tofcam/control/integration_time_controller.h"
 #include "tofcam/core/frame.h"
 
 namespace tofcam {
@@ -34,9 +41,23 @@ struct DistanceCorrection {
   void Validate() const;
 };
 
+/// Result of a noise calibration (FitDeltaLScale on static frames): the factor that turns ΔL of
+/// eq. 2 (scale 1) into a 1σ prediction in metres for this camera.
+struct NoiseCalibration {
+  double delta_l_scale = 1.0;  ///< σ = delta_l_scale * ΔL(scale 1); (0, 1e6].
+  double r_squared = 0.0;      ///< Fit quality (informative), [-1e9, 1].
+  int frames = 0;              ///< Static frames the temporal σ came from, >= 0 (informative).
+  int pixels_used = 0;         ///< Pixels in the fit, >= 0 (informative).
+
+  /// Throws Error(kInvalidArgument) naming the field.
+  void Validate() const;
+};
+
 /// A per-pixel calibration of one camera at one modulation frequency.
 struct OffsetCalibration {
-  static constexpr int kVersion = 1;  ///< Current file-format version.
+  /// Current file-format version. 2 added exposure_offset_m_per_ms, noise and
+  /// controller_setpoint; version-1 files load with s = 0 (no exposure compensation) and neither.
+  static constexpr int kVersion = 2;
 
   int version = kVersion;
   std::string camera_model;               ///< Must match CameraInfo::model.
@@ -49,6 +70,15 @@ struct OffsetCalibration {
   double wall_distance_m = 0.0;       ///< Perpendicular camera-to-wall distance at calibration, m.
   double wall_normal[3] = {0.0, 0.0, 1.0};  ///< Wall normal in the camera frame (unit, z > 0).
   int frames_averaged = 0;                  ///< Frames averaged per pixel.
+  /// Exposure offset s: how much longer every pixel reads per ms of integration time, m/ms,
+  /// |s| <= 0.1 (the simulated SR-2: 0.0005). Applied as -s (t - integration_time_us) / 1000
+  /// in eq. 1 for frames whose FrameInfo::integration_time_us is known (> 0); 0 = none.
+  double exposure_offset_m_per_ms = 0.0;
+  /// Noise calibration of eq. 2 for this camera; absent when not measured.
+  std::optional<NoiseCalibration> noise;
+  /// Integration-time controller set point chosen from an integration-time sweep of the scene
+  /// the camera works in (ChooseSetpoint); absent when not measured.
+  std::optional<ControllerSetpoint> controller_setpoint;
   /// o[i][j]: measured minus true radial distance, m, in (-L/2, L/2); width x height.
   Image<float> offset_m;
   /// Bits OR-ed into every corrected frame: kInvalid where a pixel could not be calibrated
@@ -61,11 +91,18 @@ struct OffsetCalibration {
   void Validate() const;
 };
 
+/// The per-frame exposure term of eq. 1 in metres: s (t - t_cal) / 1000 for a frame taken with
+/// `integration_time_us` = t; 0 when t is unknown (<= 0 or not finite) or s = 0.
+[[nodiscard]] double ExposureShiftM(const OffsetCalibration& calibration,
+                                    double integration_time_us) noexcept;
+
 /// Applies eq. 1 (then g, if present) to every pixel. Pixels flagged kInvalid (no measurement)
 /// pass through untouched, flags kept; other flagged pixels (e.g. saturated) are corrected too,
 /// their flags kept, so displays of raw data stay calibrated. The calibration's pixel_flags are
-/// OR-ed in. Throws Error(kMismatch) when the frame's size or
-/// modulation frequency differs from the calibration's.
+/// OR-ed in. The exposure term ExposureShiftM(calibration, frame.info.integration_time_us) is
+/// subtracted from every pixel. Throws Error(kMismatch) when the frame's size or modulation
+/// frequency differs from the calibration's, Error(kInvalidArgument) when the exposure term
+/// exceeds L/4 (a slope or integration time far outside anything physical).
 [[nodiscard]] MetricFrame ApplyCalibration(const MetricFrame& frame,
                                            const OffsetCalibration& calibration);
 

@@ -6,7 +6,9 @@
 ///
 /// The controlled quantity is the mean intensity Ī_t over the region of interest and over the
 /// pixels whose flags have none of `ControllerOptions::exclude_flags` (by default only kInvalid:
-/// saturated pixels must count, they are what tells the controller to back off). For frames
+/// saturated pixels must count, they are what tells the controller to back off; fully clipped
+/// pixels, which SwissRangers report with amplitude 0 and so kInvalid, count through
+/// `clipped_intensity`). For frames
 /// without an intensity channel the amplitude is averaged instead and I_A must be given in
 /// amplitude units. Intensity and I_A are in register units (0..65532); the control variable is
 /// the integration-time register (SR-2: 1..255, 255 µs per step).
@@ -30,6 +32,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -66,8 +69,13 @@ struct ControllerOptions {
   int min_register = 1;    ///< Lower clamp, [1, max_register] (SR-2: 1).
   int max_register = 255;  ///< Upper clamp, [min_register, 65535] (SR-2: 255).
   RegionOfInterest roi;    ///< Pixels Ī_t is taken over; whole image by default.
-  /// Pixels with any of these flag bits are left out of Ī_t and of the histogram.
+  /// Pixels with any of these flag bits are left out of Ī_t and of the histogram ...
   std::uint16_t exclude_flags = static_cast<std::uint16_t>(Flag::kInvalid);
+  /// ... unless their intensity is at least this (register units, [0, 65532]; 0 = off): a
+  /// SwissRanger pixel whose taps all clipped reports amplitude 0 (so kInvalid: no phase) with
+  /// intensity at full scale; it is what tells the controller to back off and must count. The
+  /// default is 98 % of full scale, as SaturationOptions::max_peak.
+  double clipped_intensity = 64221.0;
 
   // VendorHistogram (tof-notes §4; SR-3000 vendor settings by default).
   double percent_over_pos = 10.0;     ///< percentOverPos, % of pixels above x, [0, 100).
@@ -151,9 +159,65 @@ class Fixed final : public IntegrationTimeController {
 };
 
 /// Mean of intensity (amplitude without an intensity channel) over the ROI and the pixels
-/// without `exclude_flags`; NaN when no pixel qualifies. Exposed for status lines and tests.
+/// without `exclude_flags` (or with intensity >= `clipped_intensity` when that is > 0, see
+/// ControllerOptions); NaN when no pixel qualifies. Exposed for status lines and tests.
 [[nodiscard]] double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& roi,
-                                          std::uint16_t exclude_flags);
+                                          std::uint16_t exclude_flags,
+                                          double clipped_intensity = 0.0);
+
+/// One step of an integration-time sweep (paper fig. 3): the register and the frame's means.
+struct IntegrationSweepPoint {
+  int integration_register = 0;     ///< Register of the frame, >= 1.
+  double mean_intensity = 0.0;      ///< Ī over pixels without kInvalid, register units (>= 0).
+  double mean_amplitude = 0.0;      ///< Mean amplitude over the same pixels, register units (>= 0).
+  double saturated_fraction = 0.0;  ///< Fraction of those pixels flagged kSaturated, [0, 1].
+};
+
+/// How ChooseSetpoint derives the P-controller's constants from a sweep.
+struct SetpointOptions {
+  /// I_A = this x the mean intensity at the amplitude maximum ("a little below"), (0, 1].
+  double target_fraction = 0.9;
+  /// Upper bound of the loop gain V_p * k at c_0 (k = intensity gained per register there). The
+  /// printed position law's error is multiplied by -V_p k each frame, so below 1 it decays;
+  /// 0.5 halves it per frame with little ringing. (0, 1).
+  double max_loop_gain = 0.5;
+  /// Intensity of a fully saturated image (register units): V_p is at least large enough that
+  /// such an image drives the law to min_register, unless max_loop_gain forbids it. (0, 65532].
+  double saturated_intensity = 65532.0;
+  int min_register = 1;    ///< Register bounds of the camera, 1 <= min <= max <= 65535.
+  int max_register = 255;  ///< (the same as ControllerOptions).
+
+  /// Throws Error(kInvalidArgument) naming the field.
+  void Validate() const;
+};
+
+/// The set point of the paper's controller, chosen the way the paper chose I_A (section III-A):
+/// from an integration-time sweep of the working scene, a little below the mean intensity at the
+/// amplitude maximum, with c_0 at the register where the scene gives I_A.
+struct ControllerSetpoint {
+  double target_intensity = 16000.0;            ///< I_A, register units, (0, 65532].
+  int bias_register = 40;                       ///< c_0: register where Ī = I_A, >= 1.
+  double gain_register_per_intensity = 2.5e-4;  ///< V_p, registers per intensity unit, [0, 1].
+  int amplitude_max_register = 0;        ///< Register of the sweep's amplitude maximum (info).
+  double amplitude_max_intensity = 0.0;  ///< Ī there (info), register units.
+  double intensity_per_register = 0.0;   ///< k at c_0 (info), intensity units per register.
+  std::string scene;                     ///< What the camera looked at during the sweep (info).
+
+  /// Throws Error(kInvalidArgument) naming the field.
+  void Validate() const;
+  /// `base` with I_A, c_0 and V_p replaced by the set point's and kind = kMayProportional.
+  [[nodiscard]] ControllerOptions Apply(ControllerOptions base) const;
+};
+
+/// Picks the amplitude maximum of `sweep` (mean amplitude; the first of equal maxima), sets
+/// I_A = target_fraction x its mean intensity, c_0 = the register where the mean intensity
+/// crosses I_A (linear interpolation between sweep points, rounded; the lowest register of the
+/// sweep when even that is brighter), k = the intensity slope around c_0 and
+/// V_p = min((c_0 - min_register) / (saturated_intensity - I_A), max_loop_gain / k).
+/// Throws Error(kInvalidArgument) for bad options, fewer than 3 points, registers not strictly
+/// increasing, or non-finite / negative means.
+[[nodiscard]] ControllerSetpoint ChooseSetpoint(std::span<const IntegrationSweepPoint> sweep,
+                                                const SetpointOptions& options = {});
 
 /// Validates the options and builds the controller of `options.kind`.
 [[nodiscard]] std::unique_ptr<IntegrationTimeController> MakeController(

@@ -39,13 +39,28 @@ inline constexpr double kMesaModulationFrequencyHz = 30e6;
 struct ImportedSequence {
   CameraInfo camera;
   std::vector<Frame> frames;
+  /// Noise scale of this camera's ΔL (AccuracyOptions::scale, σ = scale x ΔL of eq. 2 with
+  /// scale 1, amplitude-only form) where the importer knows it; see docs/importers.md. The ΔL of
+  /// an imported camera is in its own register convention (L, amplitude units), so without a
+  /// scale the paper's threshold in metres means nothing for it.
+  std::optional<double> delta_l_scale;
+  std::string delta_l_scale_note;  ///< Where delta_l_scale came from, one line.
 };
+
+/// The noise scale a static multi-frame recording gives itself: FitDeltaLScale over its frames
+/// (all at one integration time; the temporal σ of each pixel against its ΔL). nullopt with
+/// fewer than 3 frames, frames of different sizes, or too few pixels valid in every frame. A
+/// scene that moved inflates σ and so the scale: the accuracy filter then rejects more (fails
+/// safe). Used by the importers of multi-frame formats.
+[[nodiscard]] std::optional<double> SelfCalibratedNoiseScale(const std::vector<Frame>& frames);
 
 /// ifm O3D303 HDF5 as written by libo3d3xx (`/o3d3xx/camera/<stream>/<N>`): streams depth (mm,
 /// radial, 0 = invalid), raw_amplitude, confidence (bit0 invalid -> kInvalid, bit1 saturated ->
 /// kSaturated, bit2 bad symmetry -> kInvalid, bit3 low amplitude -> kLowAmplitude) and xyz (used
 /// to fit the pinhole intrinsics). Frames are ordered by their `seq` attribute; timestamps come
 /// from `stamp.secs`/`stamp.nsecs`, relative to the first frame.
+/// delta_l_scale: SelfCalibratedNoiseScale of the file's frames (libo3d3xx dumps of a camera
+/// standing still; the ifm stores no noise figure).
 [[nodiscard]] ImportedSequence ImportIfmO3d3xx(const std::filesystem::path& h5_file);
 
 /// ADI ADTF3175 interleaved frame (no header, 5 bytes per pixel: depth uint16 LE in mm,
@@ -116,6 +131,13 @@ class ImportedCamera final : public Camera {
   [[nodiscard]] double PanAngleRad() const override;
 
   [[nodiscard]] std::size_t frame_count() const noexcept { return sequence_.frames.size(); }
+  /// The sequence's noise scale (ImportedSequence::delta_l_scale) and where it came from.
+  [[nodiscard]] std::optional<double> delta_l_scale() const noexcept {
+    return sequence_.delta_l_scale;
+  }
+  [[nodiscard]] const std::string& delta_l_scale_note() const noexcept {
+    return sequence_.delta_l_scale_note;
+  }
 
  private:
   [[nodiscard]] const FrameInfo& NextInfo() const;
