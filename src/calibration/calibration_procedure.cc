@@ -804,8 +804,14 @@ std::vector<IntegrationSweepPoint> SweepIntegrationTime(Camera& camera,
     const Image<PixelFlags> clipped = SaturationFilter(frame, SaturationOptions{});
     double intensity = 0.0, amplitude = 0.0;
     std::size_t count = 0, saturated = 0;
+    // A pixel whose taps all clipped reads amplitude 0 (no phase, hence kInvalid) at full-scale
+    // intensity: it is a reading, and its collapsed amplitude is what makes the maximum.
+    const double clipped_intensity = ControllerOptions{}.clipped_intensity;
     for (std::size_t i = 0; i < frame.amplitude.size(); ++i) {
-      if (frame.flags[i].Has(Flag::kInvalid)) continue;
+      if (frame.flags[i].Has(Flag::kInvalid) &&
+          !(frame.has_intensity() && frame.intensity[i] >= clipped_intensity)) {
+        continue;
+      }
       intensity += channel[i];
       amplitude += frame.amplitude[i];
       saturated += (frame.flags[i] | clipped[i]).Has(Flag::kSaturated) ? 1 : 0;

@@ -280,6 +280,9 @@ void SetpointOptions::Validate() const {
   if (!(target_fraction > 0.0 && target_fraction <= 1.0)) {
     Bad("setpoint target_fraction", Num(target_fraction), "must be in (0, 1]");
   }
+  if (!(plateau_tolerance >= 0.0 && plateau_tolerance <= 0.5)) {
+    Bad("setpoint plateau_tolerance", Num(plateau_tolerance), "must be in [0, 0.5]");
+  }
   if (!(max_loop_gain > 0.0 && max_loop_gain < 1.0)) {
     Bad("setpoint max_loop_gain", Num(max_loop_gain), "must be in (0, 1)");
   }
@@ -348,6 +351,13 @@ ControllerSetpoint ChooseSetpoint(std::span<const IntegrationSweepPoint> sweep,
   std::size_t best = 0;
   for (std::size_t k = 1; k < sweep.size(); ++k) {
     if (sweep[k].mean_amplitude > sweep[best].mean_amplitude) best = k;
+  }
+  const double plateau = (1.0 - options.plateau_tolerance) * sweep[best].mean_amplitude;
+  for (std::size_t k = 0; k < best; ++k) {
+    if (sweep[k].mean_amplitude >= plateau) {
+      best = k;
+      break;
+    }
   }
   ControllerSetpoint s;
   s.amplitude_max_register = sweep[best].integration_register;

@@ -51,6 +51,7 @@ void CameraModel::Validate() const {
   Require(read_noise_e >= 0, "read_noise_e must be >= 0");
   Require(dark_current_e_per_s >= 0, "dark_current_e_per_s must be >= 0");
   Require(gain_reg_per_e > 0, "gain_reg_per_e must be > 0");
+  Require(overflow_fraction >= 0 && overflow_fraction <= 1, "overflow_fraction must be in [0, 1]");
   Require(blooming_fraction >= 0 && blooming_fraction <= 1, "blooming_fraction must be in [0, 1]");
   Require(blooming_sigma_px > 0, "blooming_sigma_px must be > 0");
   double total = 0;
@@ -111,6 +112,7 @@ CameraModel ParseCameraModel(std::string_view yaml_text, const std::string& sour
                "read_noise_e",
                "dark_current_e_per_s",
                "gain_reg_per_e",
+               "overflow_fraction",
                "blooming_fraction",
                "blooming_sigma_px",
                "scattering",
@@ -178,6 +180,7 @@ CameraModel ParseCameraModel(std::string_view yaml_text, const std::string& sour
   r.Read(root, "read_noise_e", m.read_noise_e, 0, 1e6);
   r.Read(root, "dark_current_e_per_s", m.dark_current_e_per_s, 0, 1e12);
   r.Read(root, "gain_reg_per_e", m.gain_reg_per_e, 1e-9, 1e6);
+  r.Read(root, "overflow_fraction", m.overflow_fraction, 0, 1);
   r.Read(root, "blooming_fraction", m.blooming_fraction, 0, 1);
   r.Read(root, "blooming_sigma_px", m.blooming_sigma_px, 1e-3, 1000);
   if (const YAML::Node s = root["scattering"]) {

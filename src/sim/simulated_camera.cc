@@ -558,25 +558,54 @@ struct SimulatedCamera::Impl {
     }
   }
 
-  // Over-full-well charge is charge, not light: it leaves the saturated pixel during the whole
-  // exposure and reaches a neighbour's photo-gate at times unrelated to the 20 MHz gate clock, so
-  // the neighbour's demodulation sorts it into its four taps equally on average. It therefore
-  // raises the neighbour's offset (intensity) but not its amplitude, and each electron lands
-  // independently, so every tap receives a Poisson count of it (when shot noise is on). That is
+  // Saturation physics on the noisy tap charges (electrons). A storage site holds at most the
+  // full well. Of a full site's excess, `overflow` spills over the barrier into the pixel's other
+  // sites, which share its photo-gate (filled evenly into the sites with room left): the taps of a
+  // saturating pixel equalise, so its offset keeps rising while its amplitude collapses. Of the
+  // charge that cannot stay in the pixel, `bloom` leaves it for the neighbours (Gaussian of
+  // blooming_sigma_px); the rest goes to the drain.
+  // Bloomed charge is charge, not light: it reaches a neighbour's photo-gate at times unrelated to
+  // the 20 MHz gate clock, so the neighbour's demodulation sorts it into its four taps equally on
+  // average. It raises the neighbour's offset (intensity) but not its amplitude, and each electron
+  // lands independently, so every tap receives a Poisson count of it (when shot noise is on):
   // the extra noise eq. 2 predicts from the raised intensity.
-  // Returns false (and leaves the taps alone) when no tap exceeds the full well; otherwise
-  // bloom_mean holds the mean spill per tap of every pixel.
-  bool Bloom(double full_well, std::uint64_t frame_seed, bool shot_noise) {
+  // Returns true when charge bloomed; bloom_mean then holds the mean spill per tap of every pixel.
+  bool Saturate(double full_well, double overflow, double bloom, std::uint64_t frame_seed,
+                bool shot_noise) {
     const std::size_t np = taps[0].size();
+    const float fw = static_cast<float>(full_well);
+    const float keep_share = static_cast<float>(overflow);
+    const float out_share = static_cast<float>(bloom);
     bool any = false;
     bloom_mean.assign(np, 0.f);
-    const float fw = static_cast<float>(full_well);
-    const float frac = static_cast<float>(model.blooming_fraction);
     for (std::size_t i = 0; i < np; ++i) {
-      float excess = 0;
-      for (const auto& tap : taps) excess += std::max(0.f, tap[i] - fw);
-      if (excess > 0) {
-        bloom_mean[i] = frac * excess / 4;  // per tap of the receiving pixel
+      float n[4], excess = 0;
+      for (int k = 0; k < 4; ++k) {
+        n[k] = taps[k][i];
+        if (n[k] > fw) {
+          excess += n[k] - fw;
+          n[k] = fw;
+        }
+      }
+      if (!(excess > 0)) continue;
+      float keep = keep_share * excess;
+      // Water-filling: at most three rounds, since each round fills at least one more site.
+      for (int round = 0; round < 4 && keep > 0; ++round) {
+        int room = 0;
+        for (int k = 0; k < 4; ++k) room += n[k] < fw;
+        if (room == 0) break;
+        const float share = keep / static_cast<float>(room);
+        for (int k = 0; k < 4; ++k) {
+          if (!(n[k] < fw)) continue;
+          const float add = std::min(share, fw - n[k]);
+          n[k] += add;
+          keep -= add;
+        }
+      }
+      for (int k = 0; k < 4; ++k) taps[k][i] = n[k];
+      const float spill = out_share * ((1 - keep_share) * excess + std::max(keep, 0.f));
+      if (spill > 0) {
+        bloom_mean[i] = spill / 4;  // per tap of the receiving pixel
         any = true;
       }
     }
@@ -863,8 +892,9 @@ std::optional<Frame> SimulatedCamera::Grab() {
       }
     }
   });
-  if (opt.saturation && opt.blooming && model.blooming_fraction > 0) {
-    if (im.Bloom(full_well, frame_seed, opt.shot_noise)) {
+  if (opt.saturation) {
+    if (im.Saturate(full_well, model.overflow_fraction,
+                    opt.blooming ? model.blooming_fraction : 0.0, frame_seed, opt.shot_noise)) {
       // The spilled charge is offset without amplitude: it raises the true shot-noise sigma by
       // sqrt((B + spill) / B) (B including the read-noise variance).
       for (std::size_t p = 0; p < im.bloom_mean.size(); ++p) {

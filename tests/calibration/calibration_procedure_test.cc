@@ -455,6 +455,39 @@ TEST(SweepIntegrationTimeTest, MeansMatchTheFakesRadiometry) {
   EXPECT_THROW((void)SweepIntegrationTime(camera, o), Error);
 }
 
+TEST(SweepIntegrationTimeTest, ClippedPixelsWithoutPhaseCountBlockedOnesDoNot) {
+  // Pixels whose intensity clips read amplitude 0 (kInvalid: no phase) at 65532: they are
+  // readings and count with amplitude 0; the 5 blocked columns (all registers 0) do not.
+  FakeWallOptions fo;
+  fo.collapse_clipped = true;
+  fo.blocked_columns = 5;
+  FakeWallCamera camera(fo);
+  IntegrationSweepOptions o;
+  o.from_register = 20;
+  o.to_register = 60;
+  o.steps = 3;
+  const std::vector<IntegrationSweepPoint> points = SweepIntegrationTime(camera, o);
+  ASSERT_EQ(points.size(), 3u);
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const int reg = 20 + 20 * static_cast<int>(k);
+    double i_sum = 0.0, a_sum = 0.0;
+    int n = 0;
+    for (int r = 0; r < 31; ++r) {
+      for (int c = 5; c < 40; ++c) {
+        const double t = camera.TrueDistance(r, c);
+        const double signal = 3000.0 * reg / (t * t);
+        i_sum += std::min(signal, 65532.0);
+        a_sum += signal >= 65532.0 ? 0.0 : 0.4 * signal;
+        ++n;
+      }
+    }
+    EXPECT_NEAR(points[k].mean_intensity, i_sum / n, 1.0) << reg;
+    EXPECT_NEAR(points[k].mean_amplitude, a_sum / n, 1.0) << reg;
+  }
+  // Register 60 at 1.5-1.9 m: signal 50000-80000, so part of the wall clips and collapses.
+  EXPECT_LT(points[2].mean_amplitude, points[1].mean_amplitude * 1.5);
+}
+
 // A camera that ends after `frames` frames (a finite recording).
 class FiniteCamera final : public Camera {
  public:

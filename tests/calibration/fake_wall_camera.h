@@ -33,6 +33,7 @@ struct FakeWallOptions {
   double exposure_offset_m_per_ms = 0.0;  // distance shift per ms of integration time
   bool pattern = true;                    // bowl + pixel-to-pixel pattern
   int blocked_columns = 0;                // leftmost columns return nothing (amplitude 0)
+  bool collapse_clipped = false;  // a pixel whose intensity clips reads amplitude 0 (taps full)
   std::uint64_t seed = 1;
 };
 
@@ -94,7 +95,9 @@ class FakeWallCamera final : public Camera {
         const double t = TrueDistance(r, c);
         const double signal = o_.signal_per_register_at_1m * register_ / (t * t);
         const double intensity = std::min(signal + o_.background, 65532.0);
-        const double amplitude = std::min(o_.contrast * signal, 65532.0);
+        const double amplitude = o_.collapse_clipped && intensity >= 65532.0
+                                     ? 0.0
+                                     : std::min(o_.contrast * signal, 65532.0);
         const double delta_l = range / std::sqrt(8.0) * std::sqrt(intensity) / (2.0 * amplitude);
         double d = t + TrueOffset(r, c) + Wiggle(t) + drift + exposure_shift +
                    o_.noise_scale * delta_l * normal_(rng_);

@@ -285,6 +285,27 @@ TEST(ChooseSetpointTest, HandComputedFromTheAmplitudeMaximum) {
   EXPECT_DOUBLE_EQ(first.target_intensity, 18000.0);
 }
 
+TEST(ChooseSetpointTest, AFlatTopPicksTheStartOfThePlateau) {
+  // Amplitude 1000, 2000, 2980, 2990, 3000, 2995, 2500: the arg-max (register 50) sits on a
+  // plateau within 1 % of its value from register 30 on. With the default 2 % tolerance the
+  // maximum is register 30 (2980 >= 0.98 x 3000 = 2940), where the intensity is 15000; with
+  // tolerance 0 it is the arg-max, intensity 25000.
+  const auto sweep =
+      Sweep({10, 20, 30, 40, 50, 60, 70}, {5000, 10000, 15000, 20000, 25000, 30000, 35000},
+            {1000, 2000, 2980, 2990, 3000, 2995, 2500});
+  const ControllerSetpoint plateau = ChooseSetpoint(sweep);
+  EXPECT_EQ(plateau.amplitude_max_register, 30);
+  EXPECT_DOUBLE_EQ(plateau.amplitude_max_intensity, 15000.0);
+  EXPECT_DOUBLE_EQ(plateau.target_intensity, 13500.0);
+  SetpointOptions argmax;
+  argmax.plateau_tolerance = 0.0;
+  const ControllerSetpoint peak = ChooseSetpoint(sweep, argmax);
+  EXPECT_EQ(peak.amplitude_max_register, 50);
+  EXPECT_DOUBLE_EQ(peak.amplitude_max_intensity, 25000.0);
+  argmax.plateau_tolerance = 0.6;
+  EXPECT_THROW((void)ChooseSetpoint(sweep, argmax), Error);
+}
+
 TEST(ChooseSetpointTest, PrintedLawSettlesAtTheSetpointAndBacksOffFromABrightScene) {
   // Plant: mean intensity I = k c with k = 500 per register (saturating at 65532); the mean
   // amplitude grows until pixels start to saturate at register 60, then falls (paper fig. 3).

@@ -211,8 +211,9 @@ struct IntegrationSweepOptions {
 
 /// Sweeps the integration time over the options' registers and returns, per register, the
 /// frame's mean intensity (amplitude without an intensity channel), mean amplitude and saturated
-/// fraction over the pixels without kInvalid (saturated pixels count: their collapsed amplitude
-/// is what makes the amplitude maximum). The camera is left at its previous register. Throws
+/// fraction over the pixels without kInvalid, plus those whose intensity is clipped
+/// (>= ControllerOptions::clipped_intensity; saturated pixels count: their collapsed amplitude is
+/// what makes the amplitude maximum). The camera is left at its previous register. Throws
 /// Error(kInvalidArgument) for bad options and Error(kIo) when the camera stops delivering.
 [[nodiscard]] std::vector<IntegrationSweepPoint> SweepIntegrationTime(
     Camera& camera, const IntegrationSweepOptions& options = {},

@@ -177,6 +177,12 @@ struct IntegrationSweepPoint {
 struct SetpointOptions {
   /// I_A = this x the mean intensity at the amplitude maximum ("a little below"), (0, 1].
   double target_fraction = 0.9;
+  /// The mean amplitude of a scene often has a flat top rather than a peak (the paper: "mean
+  /// amplitude functions do not provide stable approximations of working points"); on a plateau
+  /// the arg-max is decided by noise. The amplitude maximum is therefore the lowest register whose
+  /// mean amplitude is within this fraction of the largest one: the start of the plateau, where
+  /// saturation begins to cost amplitude. 0 = the plain arg-max. [0, 0.5].
+  double plateau_tolerance = 0.02;
   /// Upper bound of the loop gain V_p * k at c_0 (k = intensity gained per register there). The
   /// printed position law's error is multiplied by -V_p k each frame, so below 1 it decays;
   /// 0.5 halves it per frame with little ringing. (0, 1).
@@ -209,7 +215,8 @@ struct ControllerSetpoint {
   [[nodiscard]] ControllerOptions Apply(ControllerOptions base) const;
 };
 
-/// Picks the amplitude maximum of `sweep` (mean amplitude; the first of equal maxima), sets
+/// Picks the amplitude maximum of `sweep` (the lowest register whose mean amplitude is within
+/// plateau_tolerance of the largest; with tolerance 0 the first of equal maxima), sets
 /// I_A = target_fraction x its mean intensity, c_0 = the register where the mean intensity
 /// crosses I_A (linear interpolation between sweep points, rounded; the lowest register of the
 /// sweep when even that is brighter), k = the intensity slope around c_0 and

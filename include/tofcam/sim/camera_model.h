@@ -52,8 +52,14 @@ struct CameraModel {
   double read_noise_e = 30.0;           ///< Per-tap read noise, electrons RMS (>= 0).
   double dark_current_e_per_s = 2.0e5;  ///< Per-tap dark current, electrons / s (>= 0).
   double gain_reg_per_e = 0.65532;      ///< Register units per electron for amplitude/intensity.
-  double blooming_fraction = 0.5;       ///< Share of over-full-well charge that spills, [0, 1].
-  double blooming_sigma_px = 2.0;       ///< Spread of spilled charge, px (> 0).
+  /// Share of a full tap's excess charge that spills over into the same pixel's other taps (they
+  /// share one photo-gate), [0, 1]: the taps of a saturating pixel equalise, so its offset keeps
+  /// rising while its amplitude collapses. 0 = clip each tap on its own.
+  double overflow_fraction = 0.0;
+  /// Share of the excess that does not stay in the pixel and spills into neighbouring pixels (as
+  /// offset charge), [0, 1]; the rest goes to the drain.
+  double blooming_fraction = 0.5;
+  double blooming_sigma_px = 2.0;  ///< Spread of spilled charge, px (> 0).
   std::vector<ScatterLobe> scattering = {{0.01, 8.0}, {0.01, 40.0}};  ///< Scattering PSF lobes.
 
   // Systematic distance errors.
