@@ -39,11 +39,17 @@ using Clock = std::chrono::steady_clock;
 struct DemoOptions {
   std::string out = "out/demo";
   std::uint64_t seed = 1;
-  int frames = 300;
+  int frames = 0;           // 0: as many as the scene's duration takes
+  double duration_s = 0.0;  // camera time to run; 0: the demo scene's duration (10 s)
   int threads = 2;
   bool recalibrate = false;
   double wall_distance_m = 2.0;
 };
+
+// The hall of the demo scene without the hand and the lamps: scenes/demo.yaml places its poster at
+// 1.4 m and has 0.5 W/m² of daylight (keep the two in step). The controller's set point comes
+// from an integration-time sweep of it, as the paper chose I_A from a sweep of its scene.
+constexpr const char* kDemoHall = "pavilion?poster_distance_m=1.4&daylight_w_m2=0.5";
 
 // A moment of the demo scene worth a picture (scenes/demo.yaml: the hand is in place 2.5-4.5 s,
 // the lamps are on 6-8.5 s).
@@ -182,10 +188,12 @@ OffsetCalibration Calibrate(const DemoOptions& o, const sim::CameraModel& model,
   if (!calibration->controller_setpoint) {
     // The paper chose I_A from an integration-time sweep of its scene (fig. 3): a little below
     // the intensity at the amplitude maximum. Same here, on the hall of the demo scene.
-    sim::SimulatedCamera hall(sim::LoadBuiltinScene("pavilion"), model, Simulator(o, 3000));
+    const auto [hall_name, hall_overrides] = sim::ParseSceneSpec(kDemoHall);
+    sim::SimulatedCamera hall(sim::LoadBuiltinScene(hall_name, hall_overrides), model,
+                              Simulator(o, 3000));
     std::vector<IntegrationSweepPoint> sweep = SweepIntegrationTime(hall);
     ControllerSetpoint setpoint = ChooseSetpoint(sweep);
-    setpoint.scene = "sim:pavilion";
+    setpoint.scene = std::string("sim:") + kDemoHall;
     calibration->controller_setpoint = setpoint;
     nlohmann::json points = nlohmann::json::array();
     for (const IntegrationSweepPoint& p : sweep) {
@@ -368,9 +376,13 @@ nlohmann::json StatsJson(const FrameStats& s) {
 }
 
 void RunDemo(const DemoOptions& o) {
-  if (o.frames < 1 || o.frames > 100000) {
+  if (o.frames < 0 || o.frames > 100000) {
     throw Error(ErrorCode::kInvalidArgument,
-                "--frames " + std::to_string(o.frames) + " must be in [1, 100000]");
+                "--frames " + std::to_string(o.frames) + " must be in [0, 100000]");
+  }
+  if (!(o.duration_s >= 0.0 && o.duration_s <= 3600.0)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--duration-s " + std::to_string(o.duration_s) + " must be in [0, 3600]");
   }
   if (o.threads < 1 || o.threads > 64) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -414,10 +426,15 @@ void RunDemo(const DemoOptions& o) {
   Pipeline pipeline(options, camera.Info());
   camera.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
   const ControllerOptions& c = pipeline.options().controller;
+  // The camera sets the pace: a frame takes max(1/30 s, integration + readout), so long
+  // exposures give fewer frames in the same camera time.
+  const double duration_s = o.duration_s > 0.0 ? o.duration_s : camera.scene().duration_s;
+  const int max_frames = o.frames > 0 ? o.frames : 100000;
   std::printf(
-      "2/3 run: %d frames of the 'demo' scene (%.0f s at %.0f frames/s), controller %s "
+      "2/3 run: %.1f s of the 'demo' scene at up to %.0f frames/s%s, controller %s "
       "(I_A %.0f, V_p %.2g, c_0 %d), accuracy filter dL <= %.0f mm\n",
-      o.frames, o.frames / camera.Info().max_frame_rate_hz, camera.Info().max_frame_rate_hz,
+      duration_s, camera.Info().max_frame_rate_hz,
+      o.frames > 0 ? (", at most " + std::to_string(o.frames) + " frames").c_str() : "",
       std::string(pipeline.ControllerName()).c_str(), c.target_intensity,
       c.gain_register_per_intensity, c.bias_register, options.filters.accuracy.max_delta_l_m * 1e3);
   std::fflush(stdout);
@@ -430,7 +447,7 @@ void RunDemo(const DemoOptions& o) {
   std::size_t next_moment = 0;
   nlohmann::json moments = nlohmann::json::array();
   Clock::time_point last_status = run_start;
-  for (int k = 0; k < o.frames; ++k) {
+  for (int k = 0; k < max_frames && camera.NextExposureStartS() < duration_s; ++k) {
     const std::optional<Frame> frame = camera.Grab();
     if (!frame) throw Error(ErrorCode::kInternal, "the simulator stopped delivering frames");
     pipeline.Process(*frame, result);
@@ -468,8 +485,8 @@ void RunDemo(const DemoOptions& o) {
                          {"files", {stem + "_raw.png", stem + "_filtered.png", stem + ".ply"}}});
     }
     if (Seconds(last_status) >= 1.0) {
-      std::fprintf(stderr, "demo: frame %d/%d  t=%.1f s  register %d  valid %.1f%%\n", k + 1,
-                   o.frames, result.stats.timestamp_s, result.stats.integration_time_register,
+      std::fprintf(stderr, "demo: frame %d  t=%.1f/%.1f s  register %d  valid %.1f%%\n", k + 1,
+                   result.stats.timestamp_s, duration_s, result.stats.integration_time_register,
                    result.stats.valid_fraction * 100);
       last_status = Clock::now();
     }
@@ -583,7 +600,11 @@ void SetupDemoCommand(CLI::App& app) {
       "demo", "The paper's system on the simulated SR-2: calibrate, run, pan (make demo)");
   sub->add_option("--out", o->out, "Output directory")->capture_default_str();
   sub->add_option("--seed", o->seed, "Simulator noise seed")->capture_default_str();
-  sub->add_option("--frames", o->frames, "Frames of the demo sequence")->capture_default_str();
+  sub->add_option("--duration-s", o->duration_s,
+                  "Camera time of the demo sequence, s (0 = the scene's 10 s)")
+      ->capture_default_str();
+  sub->add_option("--frames", o->frames, "At most this many frames of the sequence (0 = no cap)")
+      ->capture_default_str();
   sub->add_option("--threads", o->threads, "Simulator worker threads")->capture_default_str();
   sub->add_flag("--recalibrate", o->recalibrate, "Calibrate even when a cached file fits");
   sub->callback([o] { RunDemo(*o); });
