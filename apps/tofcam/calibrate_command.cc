@@ -8,6 +8,7 @@
 #include <ctime>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -33,7 +34,7 @@ struct CalibrateOptions {
   double warmup_max_drift_mm_per_s = 0.05;
   int warmup_max_frames = 9000;
   std::string controller = "vendor-histogram";
-  int exposure_frames = 20;  // 0: no exposure-offset measurement
+  int exposure_offset_frames = 20;  // 0: no exposure-offset measurement
   bool noise = false;
   int noise_frames = 30;
   bool setpoint = false;
@@ -100,17 +101,51 @@ void RunNoiseCalibration(Camera& camera, OffsetCalibration& calibration, int fra
       camera.IntegrationTimeRegister());
 }
 
-void SetpointSweep(const CalibrateOptions& o, OffsetCalibration& calibration) {
-  const std::string spec = o.setpoint_camera.empty() ? o.camera : o.setpoint_camera;
-  std::unique_ptr<Camera> camera = OpenCamera(spec, o.source);
-  CheckCalibrationMatches(calibration, camera->Info());
+// The camera of --setpoint, opened and checked before any long phase runs, so that a camera
+// without a settable integration time or a bad --setpoint-steps fails at once, not after minutes.
+struct SetpointSource {
+  std::string spec;
+  std::unique_ptr<Camera> camera;
   IntegrationSweepOptions sweep;
-  sweep.steps = o.setpoint_steps;
-  const std::vector<IntegrationSweepPoint> points = SweepIntegrationTime(*camera, sweep, Progress);
   SetpointOptions choose;
-  choose.min_register = camera->Info().min_integration_register;
-  choose.max_register = camera->Info().max_integration_register;
-  ControllerSetpoint setpoint = ChooseSetpoint(points, choose);
+};
+
+SetpointSource OpenSetpointSource(const CalibrateOptions& o) {
+  SetpointSource s;
+  s.spec = o.setpoint_camera.empty() ? o.camera : o.setpoint_camera;
+  if (o.setpoint_steps < 3 || o.setpoint_steps > 1000) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--setpoint-steps " + std::to_string(o.setpoint_steps) + " must be in [3, 1000]");
+  }
+  s.camera = OpenCamera(s.spec, o.source);
+  const CameraInfo& info = s.camera->Info();
+  // Register 0 (SR-3000/4000: the shortest time) cannot carry the paper's law, which the
+  // controllers clamp to >= 1 as well.
+  const int lo = std::max(1, info.min_integration_register);
+  const int hi = info.max_integration_register;
+  if (hi <= lo) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--setpoint needs a camera with a settable integration time; " + s.spec +
+                    " has integration registers " + std::to_string(info.min_integration_register) +
+                    ".." + std::to_string(hi));
+  }
+  s.sweep.from_register = lo;
+  s.sweep.to_register = hi;
+  s.sweep.steps = o.setpoint_steps;
+  s.sweep.Validate();
+  s.choose.min_register = lo;
+  s.choose.max_register = hi;
+  s.choose.Validate();
+  return s;
+}
+
+void SetpointSweep(SetpointSource& source, OffsetCalibration& calibration) {
+  const std::string& spec = source.spec;
+  Camera& camera = *source.camera;
+  CheckCalibrationMatches(calibration, camera.Info());
+  const std::vector<IntegrationSweepPoint> points =
+      SweepIntegrationTime(camera, source.sweep, Progress);
+  ControllerSetpoint setpoint = ChooseSetpoint(points, source.choose);
   setpoint.scene = spec;
   std::printf("\nintegration-time sweep of %s (paper fig. 3):\n%8s %10s %10s %10s\n", spec.c_str(),
               "register", "intensity", "amplitude", "saturated");
@@ -129,6 +164,29 @@ void SetpointSweep(const CalibrateOptions& o, OffsetCalibration& calibration) {
   calibration.controller_setpoint = setpoint;
 }
 
+// A new wall calibration replacing --out keeps the camera-level measurements of the file it
+// replaces (noise scale, controller set point) when that file fits the camera and they are not
+// measured again in this run; it says so either way.
+void KeepPreviousMeasurements(const CalibrateOptions& o, const CameraInfo& info,
+                              OffsetCalibration& calibration) {
+  if (!std::filesystem::exists(o.out)) return;
+  try {
+    const OffsetCalibration previous = LoadCalibration(o.out);
+    CheckCalibrationMatches(previous, info);
+    if (!o.noise && previous.noise) {
+      calibration.noise = previous.noise;
+      std::printf("kept the noise calibration of the previous %s\n", o.out.c_str());
+    }
+    if (!o.setpoint && previous.controller_setpoint) {
+      calibration.controller_setpoint = previous.controller_setpoint;
+      std::printf("kept the controller set point of the previous %s\n", o.out.c_str());
+    }
+  } catch (const Error& e) {
+    std::printf("replacing %s, whose measurements do not carry over (%s)\n", o.out.c_str(),
+                e.what());
+  }
+}
+
 void RunCalibrate(const CalibrateOptions& o) {
   if (!o.wall && !o.noise && !o.setpoint) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -139,16 +197,18 @@ void RunCalibrate(const CalibrateOptions& o) {
     throw Error(ErrorCode::kInvalidArgument,
                 "--noise-frames " + std::to_string(o.noise_frames) + " must be in [3, 100000]");
   }
-  if (o.exposure_frames < 0 || o.exposure_frames > 100000) {
-    throw Error(
-        ErrorCode::kInvalidArgument,
-        "--exposure-frames " + std::to_string(o.exposure_frames) + " must be in [0, 100000]");
+  if (o.exposure_offset_frames < 0 || o.exposure_offset_frames > 100000) {
+    throw Error(ErrorCode::kInvalidArgument, "--exposure-offset-frames " +
+                                                 std::to_string(o.exposure_offset_frames) +
+                                                 " must be in [0, 100000]");
   }
   const std::filesystem::path out_dir = std::filesystem::path(o.out).parent_path();
   if (!out_dir.empty() && !std::filesystem::is_directory(out_dir)) {
     throw Error(ErrorCode::kIo,
                 "--out " + o.out + ": directory " + out_dir.string() + " does not exist");
   }
+  std::optional<SetpointSource> setpoint_source;
+  if (o.setpoint) setpoint_source = OpenSetpointSource(o);
   if (!o.wall) {
     // Measurements only: added to the calibration in --out, or to a new one with zero offsets.
     std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
@@ -166,7 +226,7 @@ void RunCalibrate(const CalibrateOptions& o) {
     }
     if (o.noise) RunNoiseCalibration(*camera, calibration, o.noise_frames);
     camera.reset();
-    if (o.setpoint) SetpointSweep(o, calibration);
+    if (setpoint_source) SetpointSweep(*setpoint_source, calibration);
     SaveCalibration(o.out, calibration);
     std::printf("wrote %s\n", o.out.c_str());
     return;
@@ -194,10 +254,10 @@ void RunCalibrate(const CalibrateOptions& o) {
   wall.frames = o.frames;
   wall.warmup_max_drift_m_per_s = o.warmup_max_drift_mm_per_s * 1e-3;
   wall.warmup_max_frames = o.warmup_max_frames;
-  if (o.exposure_frames == 0) {
-    wall.exposure_fractions.clear();
+  if (o.exposure_offset_frames == 0) {
+    wall.exposure_offset_fractions.clear();
   } else {
-    wall.exposure_frames = o.exposure_frames;
+    wall.exposure_offset_frames = o.exposure_offset_frames;
   }
   if (o.controller != ControllerKindName(wall.controller.kind)) {
     wall.controller = ControllerOptions{};
@@ -215,7 +275,8 @@ void RunCalibrate(const CalibrateOptions& o) {
   // Fail before minutes of calibration, not after: the output directory must exist (checked
   // above) and the sweep must stay inside the camera's unambiguous range.
   std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
-  const double range_m = camera->Info().unambiguous_range_m();
+  const CameraInfo camera_info = camera->Info();
+  const double range_m = camera_info.unambiguous_range_m();
   if (o.sweep && o.sweep_to_m >= range_m) {
     throw Error(ErrorCode::kInvalidArgument,
                 "--sweep-to-m " + std::to_string(o.sweep_to_m) +
@@ -276,8 +337,9 @@ void RunCalibrate(const CalibrateOptions& o) {
         sweep_report.held_out_rms_before_m * 1e3, sweep_report.held_out_rms_after_m * 1e3,
         sweep_report.held_out_noise_floor_m * 1e3);
   }
+  KeepPreviousMeasurements(o, camera_info, calibration);
   camera.reset();
-  if (o.setpoint) SetpointSweep(o, calibration);
+  if (setpoint_source) SetpointSweep(*setpoint_source, calibration);
   SaveCalibration(o.out, calibration);
   std::printf("wrote %s\n", o.out.c_str());
 }
@@ -317,7 +379,7 @@ void SetupCalibrateCommand(CLI::App& app) {
                   "Exposure controller: vendor-histogram, may-incremental, may-proportional, "
                   "fixed")
       ->capture_default_str();
-  sub->add_option("--exposure-frames", o->exposure_frames,
+  sub->add_option("--exposure-offset-frames", o->exposure_offset_frames,
                   "Frames per integration time for the exposure offset (0 = do not measure)")
       ->capture_default_str();
   sub->add_flag("--noise", o->noise,

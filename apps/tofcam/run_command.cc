@@ -123,7 +123,7 @@ void RunRun(const RunOptions& o) {
   std::set<std::string> given_keys;
   PipelineOptions options = ResolveOptions(o, &given_keys);
   if (o.print_config) {
-    std::fputs(PipelineConfigToYaml(options).c_str(), stdout);
+    std::fputs(PipelineConfigToYaml(options, &given_keys).c_str(), stdout);
     return;
   }
   if (o.camera.empty()) throw Error(ErrorCode::kInvalidArgument, "--camera is required");

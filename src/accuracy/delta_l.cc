@@ -47,9 +47,10 @@ void AccuracyOptions::Validate() const {
 }
 
 void DeltaLFitOptions::Validate() const {
-  if (!(max_delta_l_m > 0.0)) {  // also rejects NaN; +inf is allowed (no cut)
-    throw Error(ErrorCode::kInvalidArgument, "noise fit option max_delta_l_m = " +
-                                                 std::to_string(max_delta_l_m) + " must be > 0");
+  if (!(max_sigma_fraction_of_range > 0.0)) {  // also rejects NaN; +inf is allowed (no cut)
+    throw Error(ErrorCode::kInvalidArgument, "noise fit option max_sigma_fraction_of_range = " +
+                                                 std::to_string(max_sigma_fraction_of_range) +
+                                                 " must be > 0");
   }
   if (min_pixels < 1 || min_pixels > (1 << 28)) {
     throw Error(
@@ -148,7 +149,7 @@ DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
     }
     if (!ok) continue;
     mean_dl /= n_frames;
-    if (!(mean_dl > 0.0) || mean_dl > options.max_delta_l_m) continue;
+    if (!(mean_dl > 0.0)) continue;
     // Deviations from the circular mean, wrapped into [-L/2, L/2): no jump at the 0 / L seam.
     const double centre_m = std::atan2(s, c) / to_rad;
     double sum = 0.0, sum2 = 0.0;
@@ -161,6 +162,24 @@ DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
     const double var = (sum2 - sum * sum / n_frames) / (n_frames - 1.0);
     sigma.push_back(std::sqrt(std::max(var, 0.0)));
     dl.push_back(mean_dl);
+  }
+  // The cut needs the scale it is part of: a first, robust estimate (the median of σ / ΔL, which
+  // the few near-dark pixels cannot move far) predicts each pixel's σ.
+  if (!sigma.empty() && std::isfinite(options.max_sigma_fraction_of_range)) {
+    std::vector<double> ratio(sigma.size());
+    for (std::size_t i = 0; i < sigma.size(); ++i) ratio[i] = sigma[i] / dl[i];
+    std::nth_element(ratio.begin(), ratio.begin() + static_cast<std::ptrdiff_t>(ratio.size() / 2),
+                     ratio.end());
+    const double max_dl = options.max_sigma_fraction_of_range * range_m / ratio[ratio.size() / 2];
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < sigma.size(); ++i) {
+      if (!(dl[i] <= max_dl)) continue;
+      sigma[kept] = sigma[i];
+      dl[kept] = dl[i];
+      ++kept;
+    }
+    sigma.resize(kept);
+    dl.resize(kept);
   }
   if (sigma.size() < static_cast<std::size_t>(options.min_pixels)) {
     throw Error(ErrorCode::kInvalidArgument, "noise fit: only " + std::to_string(sigma.size()) +

@@ -240,7 +240,7 @@ double MeasureExposureOffset(Camera& camera, const WallCalibrationOptions& o,
   const CameraInfo& info = camera.Info();
   const int base = camera.IntegrationTimeRegister();
   std::vector<int> registers = {base};
-  for (double f : o.exposure_fractions) {
+  for (double f : o.exposure_offset_fractions) {
     const int reg = static_cast<int>(std::clamp(std::lround(base * f),
                                                 static_cast<long>(info.min_integration_register),
                                                 static_cast<long>(info.max_integration_register)));
@@ -255,20 +255,29 @@ double MeasureExposureOffset(Camera& camera, const WallCalibrationOptions& o,
   std::vector<PhasorAverage> averages(registers.size(),
                                       PhasorAverage(info.width(), info.height(), range_m));
   std::vector<double> times_ms(registers.size(), 0.0);
-  for (int n = 1; n <= o.exposure_frames; ++n) {
+  for (int n = 1; n <= o.exposure_offset_frames; ++n) {
     for (std::size_t k = 0; k < registers.size(); ++k) {
       camera.SetIntegrationTimeRegister(registers[k]);
       const MetricFrame frame = GrabMetric(camera);
       CheckCameraSize(frame, info);
+      // A camera may deliver one more frame at the old setting: bin the frame by the register
+      // it reports it was taken at, by the one just set when it reports none.
+      std::size_t bin = k;
+      const auto reported =
+          std::find(registers.begin(), registers.end(), frame.info.integration_time_register);
+      if (frame.info.integration_time_register > 0 && reported != registers.end()) {
+        bin = static_cast<std::size_t>(reported - registers.begin());
+      }
       // The frame's own integration time where the source reports it (that is what eq. 1 will
       // be given later), the camera's register formula otherwise.
-      times_ms[k] = (frame.info.integration_time_us > 0.0 ? frame.info.integration_time_us
-                                                          : info.IntegrationTimeUs(registers[k])) *
-                    1e-3;
-      averages[k].Add(frame);
+      times_ms[bin] =
+          (frame.info.integration_time_us > 0.0 ? frame.info.integration_time_us
+                                                : info.IntegrationTimeUs(registers[bin])) *
+          1e-3;
+      averages[bin].Add(frame);
     }
-    if (n % 10 == 0 || n == o.exposure_frames) {
-      Report(progress, "exposure-offset", n, o.exposure_frames,
+    if (n % 10 == 0 || n == o.exposure_offset_frames) {
+      Report(progress, "exposure-offset", n, o.exposure_offset_frames,
              "averaged " + std::to_string(n) + " frames at each of " +
                  std::to_string(registers.size()) + " integration times");
     }
@@ -278,7 +287,7 @@ double MeasureExposureOffset(Camera& camera, const WallCalibrationOptions& o,
   // Per pixel: shifts against the calibration register (wrapped, seam-safe) and the pixel's own
   // least-squares slope; globally: the mean shift per register and the slope through them.
   const int min_count =
-      std::max(1, static_cast<int>(std::ceil(o.min_valid_fraction * o.exposure_frames)));
+      std::max(1, static_cast<int>(std::ceil(o.min_valid_fraction * o.exposure_offset_frames)));
   const std::size_t regs = registers.size();
   double mean_t = 0.0;
   for (double t : times_ms) mean_t += t / static_cast<double>(regs);
@@ -317,11 +326,19 @@ double MeasureExposureOffset(Camera& camera, const WallCalibrationOptions& o,
     sty += (times_ms[k] - mean_t) * r.exposure_shift_m[k];
   }
   const double s = sty / stt;  // equals the mean of the per-pixel slopes
+  // Fail here, not when the file is saved after the rest of the run: a shift of more than 0.1 m
+  // per ms is not an exposure offset but a camera or scene that changed between the registers.
+  if (!(std::abs(s) <= 0.1)) {
+    throw Error(ErrorCode::kMismatch,
+                "calibration: the wall moved by " + Num(s * 1e3) +
+                    " mm per ms of integration time between registers; an exposure offset is "
+                    "at most 100 mm/ms (did the camera or the wall move?)");
+  }
   r.exposure_offset_m_per_ms = s;
   r.exposure_pixel_slope_sd_m_per_ms =
       std::sqrt(std::max(0.0, (slope_sq - slope_sum * slope_sum / used) / (used - 1)));
   r.exposure_pixel_slope_noise_m_per_ms = std::sqrt(noise_var / used);
-  Report(progress, "exposure-offset", o.exposure_frames, o.exposure_frames,
+  Report(progress, "exposure-offset", o.exposure_offset_frames, o.exposure_offset_frames,
          "exposure offset " + Num(s * 1e3) + " mm per ms of integration time (per-pixel spread " +
              Num(r.exposure_pixel_slope_sd_m_per_ms * 1e3) + " mm/ms, noise alone " +
              Num(r.exposure_pixel_slope_noise_m_per_ms * 1e3) + ")");
@@ -376,11 +393,11 @@ void WallCalibrationOptions::Validate() const {
   if (!(max_uncalibrated_fraction >= 0.0 && max_uncalibrated_fraction <= 1.0)) {
     Bad("max_uncalibrated_fraction", max_uncalibrated_fraction, "must be in [0, 1]");
   }
-  for (double f : exposure_fractions) {
-    if (!(f > 0.0 && f <= 4.0)) Bad("exposure_fractions entry", f, "must be in (0, 4]");
+  for (double f : exposure_offset_fractions) {
+    if (!(f > 0.0 && f <= 4.0)) Bad("exposure_offset_fractions entry", f, "must be in (0, 4]");
   }
-  if (exposure_frames < 1 || exposure_frames > 100000) {
-    Bad("exposure_frames", exposure_frames, "must be in [1, 100000]");
+  if (exposure_offset_frames < 1 || exposure_offset_frames > 100000) {
+    Bad("exposure_offset_frames", exposure_offset_frames, "must be in [1, 100000]");
   }
 }
 
@@ -716,8 +733,8 @@ OffsetCalibration CalibrateDistanceCorrection(const OffsetCalibration& base,
       if (!s.usable[i]) continue;
       const double m = s.measured_m[i];
       const double e_raw = WrapSigned(m - s.truth_m[i], range_m);
-      const double e_before =
-          WrapSigned(EquationOne(m, base.offset_m[i], range_m) - s.truth_m[i], range_m);
+      const double e_before = WrapSigned(
+          EquationOne(m, base.offset_m[i] + s.exposure_shift_m, range_m) - s.truth_m[i], range_m);
       double l = EquationOne(m, out.offset_m[i] + s.exposure_shift_m, range_m);
       l = EquationOne(l, g.Evaluate(l), range_m);
       const double e_after = WrapSigned(l - s.truth_m[i], range_m);
@@ -770,6 +787,9 @@ void IntegrationSweepOptions::Validate() const {
   if (frames_per_step < 1 || frames_per_step > 100) {
     Bad("integration sweep frames_per_step", frames_per_step, "must be in [1, 100]");
   }
+  if (!(clipped_intensity >= 0.0 && clipped_intensity <= 65532.0)) {
+    Bad("integration sweep clipped_intensity", clipped_intensity, "must be in [0, 65532]");
+  }
 }
 
 std::vector<IntegrationSweepPoint> SweepIntegrationTime(Camera& camera,
@@ -806,10 +826,9 @@ std::vector<IntegrationSweepPoint> SweepIntegrationTime(Camera& camera,
     std::size_t count = 0, saturated = 0;
     // A pixel whose taps all clipped reads amplitude 0 (no phase, hence kInvalid) at full-scale
     // intensity: it is a reading, and its collapsed amplitude is what makes the maximum.
-    const double clipped_intensity = ControllerOptions{}.clipped_intensity;
     for (std::size_t i = 0; i < frame.amplitude.size(); ++i) {
-      if (frame.flags[i].Has(Flag::kInvalid) &&
-          !(frame.has_intensity() && frame.intensity[i] >= clipped_intensity)) {
+      if (!CountsForExposure(frame, i, static_cast<std::uint16_t>(Flag::kInvalid),
+                             options.clipped_intensity)) {
         continue;
       }
       intensity += channel[i];
@@ -881,13 +900,16 @@ std::optional<double> GroundTruthNoiseScale(const MetricFrame& frame,
   AccuracyOptions accuracy = options.accuracy;
   accuracy.scale = 1.0;
   const Image<float> delta_l = ComputeDeltaL(frame, accuracy);
+  // The truth σ is known here, so the cut of FitDeltaLScale applies to it directly.
+  const double max_sigma_m =
+      options.max_sigma_fraction_of_range * UnambiguousRangeM(frame.info.modulation_frequency_hz);
   double sxy = 0.0, sxx = 0.0;
   int used = 0;
   for (std::size_t i = 0; i < delta_l.size(); ++i) {
     const double sigma = frame.truth->sigma_m[i];
     const double d = delta_l[i];
-    if (!frame.flags[i].Valid() || !(sigma > 0.0) || !std::isfinite(sigma) || !(d > 0.0) ||
-        !(d <= options.max_delta_l_m)) {
+    if (!frame.flags[i].Valid() || !(sigma > 0.0) || !(sigma <= max_sigma_m) || !(d > 0.0) ||
+        !std::isfinite(d)) {
       continue;
     }
     sxy += sigma * sigma * d * d;

@@ -114,6 +114,12 @@ void OffsetCalibration::Validate() const {
     Bad("exposure_offset_m_per_ms = " + Num(exposure_offset_m_per_ms) +
         " must be finite and within ±0.1 m/ms");
   }
+  // The exposure term is s (t - t_cal): without t_cal it would shift every frame by s t.
+  if (exposure_offset_m_per_ms != 0.0 && !(integration_time_us > 0.0)) {
+    Bad("exposure_offset_m_per_ms = " + Num(exposure_offset_m_per_ms) +
+        " needs the calibration's integration_time_us (t_cal), which is " +
+        Num(integration_time_us));
+  }
   if (noise) noise->Validate();
   if (controller_setpoint) controller_setpoint->Validate();
 }

@@ -46,14 +46,6 @@ const Image<float>& ControlChannel(const MetricFrame& frame) {
   return frame.has_intensity() ? frame.intensity : frame.amplitude;
 }
 
-// A pixel counts unless it has an excluded flag; a clipped pixel counts anyway: the SR-2 reports
-// a pixel whose taps all clipped with amplitude 0 (no phase, so kInvalid) and intensity at full
-// scale, and those are exactly the pixels that must make a controller back off.
-bool Usable(const MetricFrame& frame, std::size_t i, std::uint16_t exclude, double clipped) {
-  return frame.flags.empty() || !frame.flags[i].Any(exclude) ||
-         (clipped > 0.0 && frame.has_intensity() && frame.intensity[i] >= clipped);
-}
-
 int RoundClamp(double c, int lo, int hi) {
   if (!std::isfinite(c)) return c > 0 ? hi : lo;
   return static_cast<int>(
@@ -129,6 +121,16 @@ void ControllerOptions::Validate() const {
   }
 }
 
+// A clipped pixel counts whatever its flags: the SR-2 reports a pixel whose taps all clipped with
+// amplitude 0 (no phase, so kInvalid) and intensity at full scale, and those are exactly the
+// pixels that must make a controller back off and that make the amplitude maximum of a sweep.
+bool CountsForExposure(const MetricFrame& frame, std::size_t i, std::uint16_t exclude_flags,
+                       double clipped_intensity) noexcept {
+  return frame.flags.empty() || !frame.flags[i].Any(exclude_flags) ||
+         (clipped_intensity > 0.0 && frame.has_intensity() &&
+          frame.intensity[i] >= clipped_intensity);
+}
+
 double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& roi,
                             std::uint16_t exclude_flags, double clipped_intensity) {
   const Image<float>& channel = ControlChannel(frame);
@@ -140,7 +142,7 @@ double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& ro
     const std::size_t base = static_cast<std::size_t>(row) * channel.width();
     for (int col = r.col0; col < r.col1; ++col) {
       const std::size_t i = base + col;
-      if (flags_ok && !Usable(frame, i, exclude_flags, clipped_intensity)) continue;
+      if (flags_ok && !CountsForExposure(frame, i, exclude_flags, clipped_intensity)) continue;
       const float v = channel[i];
       if (!std::isfinite(v)) continue;
       sum += v;
@@ -219,7 +221,8 @@ int VendorHistogram::Update(const MetricFrame& frame) {
     const std::size_t base = static_cast<std::size_t>(row) * channel.width();
     for (int col = r.col0; col < r.col1; ++col) {
       const std::size_t i = base + col;
-      if (flags_ok && !Usable(frame, i, options_.exclude_flags, options_.clipped_intensity)) {
+      if (flags_ok &&
+          !CountsForExposure(frame, i, options_.exclude_flags, options_.clipped_intensity)) {
         continue;
       }
       const float v = channel[i];
@@ -365,6 +368,8 @@ ControllerSetpoint ChooseSetpoint(std::span<const IntegrationSweepPoint> sweep,
   s.target_intensity = std::clamp(options.target_fraction * s.amplitude_max_intensity, 1.0,
                                   static_cast<double>(kMaxSignalRegister));
   // c_0: where the (rising) intensity curve crosses I_A at or below the amplitude maximum.
+  // No crossing happens only when even the lowest register gives more than I_A (I_A lies below
+  // the intensity at the maximum, which the curve reaches): c_0 stays at the lowest register.
   double c0 = sweep.front().integration_register;
   std::size_t seg = 0;  // segment [seg, seg + 1] used for the slope
   for (std::size_t k = 1; k <= best; ++k) {
@@ -376,10 +381,6 @@ ControllerSetpoint ChooseSetpoint(std::span<const IntegrationSweepPoint> sweep,
       c0 = a.integration_register + t * (b.integration_register - a.integration_register);
       seg = k - 1;
       break;
-    }
-    if (k == best) {
-      c0 = b.integration_register;  // never reached: hold at the maximum
-      seg = k - 1;
     }
   }
   s.bias_register =

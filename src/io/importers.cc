@@ -491,13 +491,9 @@ std::optional<double> SelfCalibratedNoiseScale(const std::vector<Frame>& frames)
   try {
     // No gate on R²: σ from 3 frames has a relative error of ~70 % per pixel, so R² is near 0
     // even for a perfect model. A scene that moved inflates σ, hence the scale: the accuracy
-    // filter then rejects more, which fails safe.
-    // FitDeltaLScale's default cut (ΔL <= 0.3 m) leaves out pixels whose phase is nearly uniform
-    // at the SR-2's L = 7.49 m; in an importer's register convention L differs (ifm: 32.8 m), so
-    // the cut is taken at the same fraction of L (4 %).
-    DeltaLFitOptions options;
-    options.max_delta_l_m = 0.3 / UnambiguousRangeM(20e6) *
-                            UnambiguousRangeM(frames.front().info.modulation_frequency_hz);
+    // filter then rejects more, which fails safe. The fit's cut is relative to L, so the
+    // importer's register convention (ifm: L = 32.8 m) needs nothing special.
+    const DeltaLFitOptions options;
     const DeltaLScaleFit fit = FitDeltaLScale(metric, options);
     if (!(fit.scale > 0.0) || !std::isfinite(fit.scale)) return std::nullopt;
     return fit.scale;

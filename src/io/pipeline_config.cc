@@ -172,12 +172,16 @@ std::string Quote(const std::string& text) {
 
 class Writer {
  public:
+  explicit Writer(const std::set<std::string>* given_keys) : given_keys_(given_keys) {}
+
   template <typename F>
   void Section(const char* key, const char* doc, F&& body) {
     Line(key + std::string(":"), doc);
+    path_.push_back(key);
     ++depth_;
     body();
     --depth_;
+    path_.pop_back();
   }
   void Field(const char* key, bool& value, const char* doc) {
     Scalar(key, value ? "true" : "false", doc);
@@ -196,7 +200,7 @@ class Writer {
   }
   template <typename T>
   void Field(const char* key, Measured<T> m, const char* doc) {
-    if (m.value != m.default_value) {
+    if (m.value != m.default_value || Given(key)) {
       Field(key, m.value, doc);
       return;
     }
@@ -230,7 +234,16 @@ class Writer {
     }
     text += '\n';
   }
+  // Whether the configuration the options came from gave `key` (in the current section).
+  bool Given(const char* key) const {
+    if (given_keys_ == nullptr) return false;
+    std::string full;
+    for (const std::string& section : path_) full += section + ".";
+    return given_keys_->count(full + key) > 0;
+  }
   int depth_ = 0;
+  std::vector<std::string> path_;
+  const std::set<std::string>* given_keys_;
 };
 
 // --- Reader ----------------------------------------------------------------------------------
@@ -427,8 +440,9 @@ PipelineOptions LoadPipelineConfig(const std::filesystem::path& path,
   return ParsePipelineConfig(text, path.string(), path.parent_path(), given_keys);
 }
 
-std::string PipelineConfigToYaml(const PipelineOptions& options) {
-  Writer writer;
+std::string PipelineConfigToYaml(const PipelineOptions& options,
+                                 const std::set<std::string>* given_keys) {
+  Writer writer(given_keys);
   writer.text =
       "# tofcam pipeline configuration (docs/pipeline.md). Keys left out keep their defaults.\n";
   PipelineOptions copy = options;  // the visitor takes references; the writer only reads
@@ -478,8 +492,17 @@ MeasuredDefaults ApplyMeasuredDefaults(PipelineOptions& options,
       used = true;
     }
     if (!given_keys.count("controller.bias_register")) {
-      options.controller.bias_register = std::clamp(
-          p.bias_register, options.controller.min_register, options.controller.max_register);
+      // The default bounds (1..255) are the SR-2's; a camera with a longer range (the set point
+      // was measured on it) widens them unless the configuration set them. The pipeline clamps
+      // the bounds to the camera's range anyway.
+      ControllerOptions& k = options.controller;
+      if (!given_keys.count("controller.min_register")) {
+        k.min_register = std::min(k.min_register, std::max(1, p.bias_register));
+      }
+      if (!given_keys.count("controller.max_register")) {
+        k.max_register = std::max(k.max_register, p.bias_register);
+      }
+      k.bias_register = std::clamp(p.bias_register, k.min_register, k.max_register);
       used = true;
     }
     from.controller =

@@ -75,7 +75,9 @@ TEST(DeltaLTest, RejectsBadOptionsAndFrames) {
 // Independent expectation for the noise calibration: an ideal 4-tap camera with shot noise,
 // simulated here from first principles. With registers = g * electrons, tof-notes §1 gives
 // σ_d = L sqrt(B) / (2 sqrt(2) π A) (electrons), hence σ_d / ΔL = 2 sqrt(g) / π.
-std::vector<MetricFrame> FourTapFrames(double gain, int frames, std::uint64_t seed) {
+// The first `dark` pixels are nearly dark (amplitude 5 e against an offset of 20000 e): their
+// phase is almost uniform over [0, L), so σ saturates near L / sqrt(12) instead of following eq. 2.
+std::vector<MetricFrame> FourTapFrames(double gain, int frames, std::uint64_t seed, int dark = 0) {
   constexpr int kW = 24, kH = 20;
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
@@ -87,6 +89,10 @@ std::vector<MetricFrame> FourTapFrames(double gain, int frames, std::uint64_t se
     offset[i] = amp[i] / 0.4 + 20000.0 * uniform(rng);
     // A third of the pixels sit on the 0 / L seam, where a naive σ would explode.
     phase[i] = (i % 3 == 0) ? 1e-4 : 2.0 * kPi * uniform(rng);
+    if (i < dark) {
+      amp[i] = 5.0;
+      offset[i] = 20000.0;
+    }
   }
   std::vector<MetricFrame> out;
   for (int t = 0; t < frames; ++t) {
@@ -131,6 +137,25 @@ TEST(DeltaLFitTest, RecoversTheShotNoiseFactorOfAnIdealFourTapCamera) {
     EXPECT_LT(fit.relative_rms, 0.2)
         << fit.scale << " " << fit.median_ratio << " " << fit.r_squared;
   }
+}
+
+TEST(DeltaLFitTest, LeavesOutNearlyDarkPixels) {
+  // 24 of 480 pixels are nearly dark: their measured amplitude is mostly noise (~100 e), so eq. 2
+  // predicts σ ~ 1 m, far beyond 1 % of L = 7.5 cm, while their true σ saturates near
+  // L / sqrt(12) = 2.2 m. The fit leaves them out and recovers the ideal factor as above; without
+  // the cut their large ΔL dominates the least squares and drags it far off.
+  const std::vector<MetricFrame> frames = FourTapFrames(1.0, 40, 11, 24);
+  const double expected = 2.0 / kPi;
+  const DeltaLScaleFit fit = FitDeltaLScale(frames);
+  EXPECT_EQ(fit.pixels_used, 480 - 24);
+  EXPECT_NEAR(fit.scale, expected, 0.03 * expected);
+  DeltaLFitOptions no_cut;
+  no_cut.max_sigma_fraction_of_range = std::numeric_limits<double>::infinity();
+  const DeltaLScaleFit all = FitDeltaLScale(frames, no_cut);
+  EXPECT_EQ(all.pixels_used, 480);
+  EXPECT_GT(std::abs(all.scale - expected), 0.1 * expected) << all.scale;
+  no_cut.max_sigma_fraction_of_range = 0.0;
+  EXPECT_THROW((void)FitDeltaLScale(frames, no_cut), Error);
 }
 
 TEST(DeltaLFitTest, SkipsInvalidPixelsAndRejectsTooFewFrames) {

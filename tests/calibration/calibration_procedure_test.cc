@@ -33,7 +33,7 @@ WallCalibrationOptions FastOptions(double distance_m) {
   o.warmup_max_drift_m_per_s = 2e-3;
   // The exposure-offset measurement has its own tests below; here it would add frames (and
   // drift) after the averaging that the drift checks do not expect.
-  o.exposure_fractions = {};
+  o.exposure_offset_fractions = {};
   return o;
 }
 
@@ -327,8 +327,8 @@ FakeWallOptions DimWall(double exposure_offset_m_per_ms) {
 TEST(ExposureOffsetTest, RecoversTheCamerasSlopeWithOneGlobalValue) {
   FakeWallCamera camera(DimWall(0.0005));  // the simulated SR-2's 0.5 mm per ms
   WallCalibrationOptions o = FastOptions(1.5);
-  o.exposure_fractions = {0.25, 0.5};
-  o.exposure_frames = 40;
+  o.exposure_offset_fractions = {0.25, 0.5};
+  o.exposure_offset_frames = 40;
   std::set<std::string> phases;
   WallCalibrationReport report;
   const OffsetCalibration c = CalibrateOffsets(
@@ -362,8 +362,8 @@ TEST(ExposureOffsetTest, RecoversTheCamerasSlopeWithOneGlobalValue) {
 TEST(ExposureOffsetTest, CompensationRemovesTheShiftAtAnotherIntegrationTime) {
   FakeWallCamera camera(DimWall(0.0005));
   WallCalibrationOptions o = FastOptions(1.5);
-  o.exposure_fractions = {0.25, 0.5};
-  o.exposure_frames = 40;
+  o.exposure_offset_fractions = {0.25, 0.5};
+  o.exposure_offset_frames = 40;
   const OffsetCalibration c = CalibrateOffsets(camera, o);
   OffsetCalibration uncompensated = c;
   uncompensated.exposure_offset_m_per_ms = 0.0;
@@ -396,15 +396,15 @@ TEST(ExposureOffsetTest, CompensationRemovesTheShiftAtAnotherIntegrationTime) {
 TEST(ExposureOffsetTest, NotMeasuredWithoutOtherRegisters) {
   FakeWallCamera camera(DimWall(0.0005));
   WallCalibrationOptions o = FastOptions(1.5);
-  o.exposure_fractions = {1.0};  // the calibration register itself: nothing to compare
+  o.exposure_offset_fractions = {1.0};  // the calibration register itself: nothing to compare
   WallCalibrationReport report;
   const OffsetCalibration c = CalibrateOffsets(camera, o, {}, &report);
   EXPECT_EQ(c.exposure_offset_m_per_ms, 0.0);
   EXPECT_EQ(report.exposure_registers.size(), 1u);
-  o.exposure_fractions = {0.0};
+  o.exposure_offset_fractions = {0.0};
   EXPECT_THROW((void)CalibrateOffsets(camera, o), Error);
-  o.exposure_fractions = {0.5};
-  o.exposure_frames = 0;
+  o.exposure_offset_fractions = {0.5};
+  o.exposure_offset_frames = 0;
   EXPECT_THROW((void)CalibrateOffsets(camera, o), Error);
 }
 

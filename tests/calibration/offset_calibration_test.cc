@@ -215,12 +215,20 @@ TEST(ExposureOffsetTest, ValidatesTheSlopeAndAbsurdShifts) {
   c.exposure_offset_m_per_ms = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(c.Validate(), Error);
   c.exposure_offset_m_per_ms = 0.1;
+  // s (t - t_cal) needs t_cal: without it every frame would shift by s t.
+  try {
+    c.Validate();
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("integration_time_us"), std::string::npos) << e.what();
+  }
+  c.integration_time_us = 1000.0;
   EXPECT_NO_THROW(c.Validate());
   MetricFrame m;
   m.radial_distance_m = Image<float>(1, 1, 1.0f);
   m.amplitude = Image<float>(1, 1, 1000.0f);
   m.flags = Image<PixelFlags>(1, 1);
-  m.info.integration_time_us = 30000.0;  // 0.1 m/ms x 30 ms = 3 m > L/4
+  m.info.integration_time_us = 30000.0;  // 0.1 m/ms x (30 - 1) ms = 2.9 m > L/4
   try {
     (void)ApplyCalibration(m, c);
     ADD_FAILURE() << "no error";

@@ -278,6 +278,15 @@ TEST(ChooseSetpointTest, HandComputedFromTheAmplitudeMaximum) {
   EXPECT_DOUBLE_EQ(steep.intensity_per_register, 10000.0);
   EXPECT_DOUBLE_EQ(steep.gain_register_per_intensity, 0.5 / 10000.0);
 
+  // Even the lowest register is brighter than I_A (peak at register 40, intensity 25500, so
+  // I_A = 22950 < 24000): c_0 is the lowest register, 10, with the slope of the first segment.
+  const ControllerSetpoint bright = ChooseSetpoint(
+      Sweep({10, 20, 30, 40, 50}, {24000, 24500, 25000, 25500, 60000}, {1, 2, 3, 4, 1}));
+  EXPECT_EQ(bright.amplitude_max_register, 40);
+  EXPECT_DOUBLE_EQ(bright.target_intensity, 22950.0);
+  EXPECT_EQ(bright.bias_register, 10);
+  EXPECT_DOUBLE_EQ(bright.intensity_per_register, 50.0);
+
   // The peak at the first register: c_0 there.
   const ControllerSetpoint first =
       ChooseSetpoint(Sweep({5, 10, 15}, {20000, 30000, 40000}, {900, 800, 700}));
@@ -379,6 +388,10 @@ TEST(ControllerTest, ClippedPixelsCountEvenWhenInvalid) {
   const auto invalid = static_cast<std::uint16_t>(Flag::kInvalid);
   EXPECT_DOUBLE_EQ(MeanControlIntensity(m, {}, invalid, 64221.0), (65532.0 + 20000.0) / 3);
   EXPECT_DOUBLE_EQ(MeanControlIntensity(m, {}, invalid), 10000.0);  // 0 = off: the old rule
+  EXPECT_TRUE(CountsForExposure(m, 0, invalid, 64221.0));           // clipped
+  EXPECT_FALSE(CountsForExposure(m, 1, invalid, 64221.0));          // invalid, not clipped
+  EXPECT_TRUE(CountsForExposure(m, 2, invalid, 64221.0));           // valid
+  EXPECT_FALSE(CountsForExposure(m, 0, invalid, 0.0));              // rule off
   // The controllers use ControllerOptions::clipped_intensity (default 64221): P-law with
   // V_p = 0.001, c_0 = 50, I_A = 16000 on Ī = 85532 / 3 gives 50 - 0.001 (28510.7 - 16000).
   MayProportional p(Opts(ControllerKind::kMayProportional, 0.001, 50));

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "tofcam/calibration/calibration_procedure.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 #include "tofcam/io/pipeline_config.h"
@@ -503,6 +504,22 @@ namespace {
 // ComputeDeltaL: L / sqrt(8) * sqrt(2.5 A) / (2 A).
 double DeltaLAmplitudeOnly(double range_m, double amplitude) {
   return range_m / std::sqrt(8.0) * std::sqrt(2.5 * amplitude) / (2.0 * amplitude);
+}
+
+TEST(IfmO3d3xx, CalibrateNoiseAgreesWithTheImportersScale) {
+  // `tofcam calibrate --noise` on the imported camera must store the scale the importer itself
+  // uses (the fit's cut is relative to L, so the ifm's 32.8 m register convention needs nothing
+  // special); otherwise the calibration file would silently override a right value with a wrong
+  // one.
+  ImportedSequence seq = ImportIfmO3d3xx(kReal / "ifm_o3d303" / "o3d3xx.h5");
+  ASSERT_TRUE(seq.delta_l_scale.has_value());
+  const double importer = *seq.delta_l_scale;
+  ImportedCamera camera(std::move(seq), /*loop=*/false);
+  NoiseCalibrationOptions options;
+  options.frames = 3;
+  const NoiseCalibration measured = CalibrateNoise(camera, options);
+  EXPECT_NEAR(measured.delta_l_scale, importer, 1e-9 * importer);
+  EXPECT_EQ(measured.frames, 3);
 }
 
 TEST(IfmO3d3xx, NoiseScaleMatchesTheMeasuredTemporalSigma) {

@@ -326,6 +326,17 @@ TEST(MeasuredDefaultsTest, CalibrationThenSourceThenDefaultAndExplicitKeysWin) {
   }
   EXPECT_EQ(given.count("filters.accuracy.max_delta_l_m"), 1u);
 
+  // A measured key the configuration set on purpose to its default stays pinned when printed
+  // with the configuration's given keys.
+  std::set<std::string> pinned_keys;
+  const PipelineOptions pinned =
+      ParsePipelineConfig("accuracy:\n  scale: 1.0\n", "conf", {}, &pinned_keys);
+  const std::string pinned_text = PipelineConfigToYaml(pinned, &pinned_keys);
+  EXPECT_NE(pinned_text.find("\n  scale: 1.0"), std::string::npos) << pinned_text;
+  EXPECT_NE(pinned_text.find("  # bias_register: 40"), std::string::npos) << pinned_text;
+  (void)ParsePipelineConfig(pinned_text, "printed", {}, &given);
+  EXPECT_EQ(given.count("accuracy.scale"), 1u);
+
   // Keys the configuration gives are never replaced.
   PipelineOptions explicit_keys = ParsePipelineConfig(
       "accuracy:\n  scale: 0.5\ncontroller:\n  bias_register: 60\n", "conf", {}, &given);
@@ -337,6 +348,22 @@ TEST(MeasuredDefaultsTest, CalibrationThenSourceThenDefaultAndExplicitKeysWin) {
   EXPECT_NE(from.delta_l_scale.find("configuration"), std::string::npos);
   EXPECT_EQ(explicit_keys.controller.bias_register, 60);
   EXPECT_EQ(explicit_keys.controller.target_intensity, 25000.0);  // not given: measured
+
+  // A set point measured on a camera with a longer register range (generic640x480: 1..2000)
+  // widens the default bounds 1..255 instead of being clamped to them; bounds the configuration
+  // gives still clamp it.
+  PipelineOptions wide;
+  wide.calibration = Measured();
+  wide.calibration->controller_setpoint->bias_register = 986;
+  (void)ApplyMeasuredDefaults(wide, {});
+  EXPECT_EQ(wide.controller.bias_register, 986);
+  EXPECT_EQ(wide.controller.max_register, 986);
+  EXPECT_EQ(wide.controller.min_register, 1);
+  PipelineOptions bounded =
+      ParsePipelineConfig("controller:\n  max_register: 500\n", "conf", {}, &given);
+  bounded.calibration = wide.calibration;
+  (void)ApplyMeasuredDefaults(bounded, given);
+  EXPECT_EQ(bounded.controller.bias_register, 500);
 }
 
 }  // namespace

@@ -60,10 +60,12 @@ struct DeltaLScaleFit {
 };
 
 struct DeltaLFitOptions {
-  /// Pixels whose mean predicted ΔL exceeds this are left out (near-dark pixels whose phase is
-  /// almost uniform, where σ saturates near L / sqrt(12) and no longer follows eq. 2). Metres,
-  /// (0, inf).
-  double max_delta_l_m = 0.3;
+  /// Pixels whose predicted σ (the median of σ / ΔL over all pixels, times their mean ΔL)
+  /// exceeds this fraction of the unambiguous range L are left out of the least squares: near
+  /// dark pixels whose phase spreads so far that wrapping (σ saturates near L / sqrt(12)) and read
+  /// noise (not in eq. 2) make σ stop following eq. 2. Relative to L, so one value serves every
+  /// camera whatever its register convention. (0, inf); +inf = no cut.
+  double max_sigma_fraction_of_range = 0.01;
   /// At least this many pixels must remain, [1, 2^28].
   int min_pixels = 10;
   /// Options for ΔL during the fit; `scale` is ignored (the fit is for scale 1).

@@ -76,10 +76,10 @@ struct WallCalibrationOptions {
   /// calibration's register (rounded, clamped to the camera's range, duplicates dropped), each
   /// in (0, 4]; lower fractions by default, because the controller put the wall near the
   /// saturation-free maximum. Empty (or no distinct register) = not measured, s = 0.
-  std::vector<double> exposure_fractions = {0.25, 0.5};
+  std::vector<double> exposure_offset_fractions = {0.25, 0.5};
   /// Frames per integration time for the exposure offset, taken round-robin (one frame per
   /// register in turn) so that any remaining warm-up drift hits every register alike, [1, 100000].
-  int exposure_frames = 20;
+  int exposure_offset_frames = 20;
 
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;
@@ -116,8 +116,8 @@ struct WallCalibrationReport {
 /// integration time set by the controller, warm-up until the drift settles, then `frames` frames
 /// averaged per pixel as phasors (so the 0 / L seam cannot bias the mean) and stored as
 /// measured minus true radial distance, wrapped into [-L/2, L/2); then the exposure offset s
-/// (OffsetCalibration::exposure_offset_m_per_ms) from the wall at the `exposure_fractions` of
-/// the register. One global s rather than one per pixel: the shift is a property of the
+/// (OffsetCalibration::exposure_offset_m_per_ms) from the wall at the `exposure_offset_fractions`
+/// of the register. One global s rather than one per pixel: the shift is a property of the
 /// modulation electronics, and a per-pixel slope from two integration times would carry the noise
 /// of two averages (see the report's pixel-slope spread, docs/calibration.md). The camera is left
 /// at the calibration's integration time. Throws Error(kInvalidArgument) for bad options or when
@@ -204,6 +204,10 @@ struct IntegrationSweepOptions {
   /// Frames grabbed per register; the last is measured (a real camera may deliver one frame at
   /// the old setting). [1, 100].
   int frames_per_step = 1;
+  /// Intensity from which a pixel counts as clipped (CountsForExposure): such pixels count with
+  /// their collapsed amplitude although they have no phase. Register units, [0, 65532]; 0 = only
+  /// pixels without kInvalid. The controllers' default.
+  double clipped_intensity = ControllerOptions{}.clipped_intensity;
 
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;
@@ -212,8 +216,8 @@ struct IntegrationSweepOptions {
 /// Sweeps the integration time over the options' registers and returns, per register, the
 /// frame's mean intensity (amplitude without an intensity channel), mean amplitude and saturated
 /// fraction over the pixels without kInvalid, plus those whose intensity is clipped
-/// (>= ControllerOptions::clipped_intensity; saturated pixels count: their collapsed amplitude is
-/// what makes the amplitude maximum). The camera is left at its previous register. Throws
+/// (>= options.clipped_intensity; saturated pixels count: their collapsed amplitude is what makes
+/// the amplitude maximum). The camera is left at its previous register. Throws
 /// Error(kInvalidArgument) for bad options and Error(kIo) when the camera stops delivering.
 [[nodiscard]] std::vector<IntegrationSweepPoint> SweepIntegrationTime(
     Camera& camera, const IntegrationSweepOptions& options = {},
@@ -239,8 +243,9 @@ struct NoiseCalibrationOptions {
 
 /// The noise scale a simulator's ground truth gives for one frame: least squares of the true
 /// per-pixel σ² (GroundTruth::sigma_m) on ΔL² of eq. 2 with scale 1, through the origin, over
-/// pixels without reject flags, with σ > 0 and ΔL <= options.max_delta_l_m (as FitDeltaLScale).
-/// nullopt when the frame has no truth σ or fewer than options.min_pixels such pixels.
+/// pixels without reject flags, with 0 < σ <= options.max_sigma_fraction_of_range x L (as
+/// FitDeltaLScale). nullopt when the frame has no truth σ or fewer than options.min_pixels such
+/// pixels.
 [[nodiscard]] std::optional<double> GroundTruthNoiseScale(const MetricFrame& frame,
                                                           const DeltaLFitOptions& options = {});
 

@@ -64,7 +64,9 @@ struct OffsetCalibration {
   int width = 0;                          ///< Pixels per row.
   int height = 0;                         ///< Rows.
   double modulation_frequency_hz = 20e6;  ///< Frequency the offsets were measured at (> 0).
-  double integration_time_us = 0.0;   ///< Integration time at the wall (as set by the controller).
+  /// Integration time at the wall (as set by the controller), µs, >= 0: t_cal of the exposure
+  /// term in eq. 1; must be > 0 when exposure_offset_m_per_ms is not 0.
+  double integration_time_us = 0.0;
   int integration_time_register = 0;  ///< Its register value.
   std::int64_t created_unix_s = 0;    ///< Creation time, seconds since 1970 UTC.
   double wall_distance_m = 0.0;       ///< Perpendicular camera-to-wall distance at calibration, m.

@@ -158,6 +158,13 @@ class Fixed final : public IntegrationTimeController {
   int register_;
 };
 
+/// Whether pixel i of `frame` counts for exposure statistics (the controllers' Ī, the sweeps of
+/// paper fig. 3): it has none of `exclude_flags`, or it is clipped (intensity >=
+/// `clipped_intensity` > 0), whatever its flags. Frames without flags count every pixel.
+[[nodiscard]] bool CountsForExposure(const MetricFrame& frame, std::size_t i,
+                                     std::uint16_t exclude_flags,
+                                     double clipped_intensity) noexcept;
+
 /// Mean of intensity (amplitude without an intensity channel) over the ROI and the pixels
 /// without `exclude_flags` (or with intensity >= `clipped_intensity` when that is > 0, see
 /// ControllerOptions); NaN when no pixel qualifies. Exposed for status lines and tests.
@@ -167,8 +174,10 @@ class Fixed final : public IntegrationTimeController {
 
 /// One step of an integration-time sweep (paper fig. 3): the register and the frame's means.
 struct IntegrationSweepPoint {
-  int integration_register = 0;     ///< Register of the frame, >= 1.
-  double mean_intensity = 0.0;      ///< Ī over pixels without kInvalid, register units (>= 0).
+  int integration_register = 0;  ///< Register of the frame, >= 1.
+  /// Ī over the pixels that count for exposure (CountsForExposure with kInvalid excluded, clipped
+  /// pixels included), register units (>= 0).
+  double mean_intensity = 0.0;
   double mean_amplitude = 0.0;      ///< Mean amplitude over the same pixels, register units (>= 0).
   double saturated_fraction = 0.0;  ///< Fraction of those pixels flagged kSaturated, [0, 1].
 };

@@ -35,8 +35,12 @@ namespace tofcam {
 
 /// Every option as YAML, with a comment per key giving units and valid range; parsing the text
 /// gives back `options` exactly (doubles are written in shortest round-trip form). The loaded
-/// `calibration` itself is not part of the text, only `calibration_file`.
-[[nodiscard]] std::string PipelineConfigToYaml(const PipelineOptions& options);
+/// `calibration` itself is not part of the text, only `calibration_file`. Camera-specific keys
+/// that ApplyMeasuredDefaults fills (accuracy.scale, the controller's set point) are printed
+/// commented out while they hold their default, unless `given_keys` (from ParsePipelineConfig)
+/// says the configuration set them: then they are printed, so the printed file pins them too.
+[[nodiscard]] std::string PipelineConfigToYaml(const PipelineOptions& options,
+                                               const std::set<std::string>* given_keys = nullptr);
 
 /// Loads `options.calibration_file` into `options.calibration` when a file is named and no
 /// calibration is loaded yet (LoadCalibration's errors), then checks it fits `camera`
