@@ -2605,16 +2605,22 @@ std::string ExperimentMarkdown(const ExperimentResult& result, const std::string
   for (const std::string& plot : result.plots) {
     md << "![" << plot << "](" << image_prefix << plot << ".png)\n\n";
   }
+  // A "|" inside a cell would end it (e.g. "|Ī-I_A|"): escaped as "\|".
+  const auto cell = [](const std::string& v) {
+    std::string out;
+    for (char ch : v) out += ch == '|' ? std::string("\\|") : std::string(1, ch);
+    return out;
+  };
   for (const Table& t : result.tables) {
     if (!t.in_markdown) continue;
     md << "|";
-    for (const std::string& c : t.columns) md << " " << c << " |";
+    for (const std::string& c : t.columns) md << " " << cell(c) << " |";
     md << "\n|";
     for (std::size_t k = 0; k < t.columns.size(); ++k) md << "---|";
     md << "\n";
     for (const auto& row : t.rows) {
       md << "|";
-      for (const std::string& c : row) md << " " << c << " |";
+      for (const std::string& c : row) md << " " << cell(c) << " |";
       md << "\n";
     }
     md << "\n";

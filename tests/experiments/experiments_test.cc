@@ -254,6 +254,10 @@ TEST(ExperimentsTest, WritesCsvAndMarkdown) {
   std::getline(quoted_csv, line);
   std::getline(quoted_csv, line);
   EXPECT_EQ(line, "\"k 8, std_mul \"\"2\"\"\",1");
+  // A "|" inside a markdown table cell is escaped, so the table keeps its columns.
+  quoted.tables[0].columns[1] = "|a-b|";
+  quoted.tables[0].in_markdown = true;
+  EXPECT_NE(ExperimentMarkdown(quoted, "").find("| \\|a-b\\| |"), std::string::npos);
   const std::string md = ExperimentMarkdown(r, "results/");
   EXPECT_NE(md.find("## "), std::string::npos);
   EXPECT_NE(md.find("(results/real_data.png)"), std::string::npos);
