@@ -24,10 +24,23 @@ def load(name):
 
 
 def num(v):
+    """A CSV cell as a number: plain numbers, "12.5 %" (as a fraction), "-" or "nan" (NaN)."""
+    v = v.strip()
     try:
+        if v.endswith("%"):
+            return float(v[:-1]) / 100.0
         return float(v)
     except ValueError:
         return float("nan")
+
+
+def mark(marks, prefix):
+    """The row of fig3_marks whose name starts with `prefix` (rows are found by name: their order
+    is the C++ side's choice)."""
+    for m in marks or []:
+        if m["mark"].startswith(prefix):
+            return m
+    return None
 
 
 def col(rows, key):
@@ -56,14 +69,19 @@ def fig3():
     axes[2].plot(reg, col(rows, "mean_intensity"), label="mean intensity")
     axes[2].plot(reg, col(rows, "intensity_linear"), "--", label="linearisation")
     axes[2].set_ylim(0, 70000)
-    if marks:
-        amax = num(marks[0]["register"])
-        onset = num(marks[1]["register"])
-        lo, hi = num(marks[2]["mean_intensity"]), num(marks[3]["mean_intensity"])
-        for ax in axes:
-            ax.axvline(amax, color="r", lw=0.8, label="amplitude max")
-            ax.axvline(onset, color="k", ls=":", lw=0.8, label="saturation onset")
-        axes[2].axhspan(lo, hi, color="g", alpha=0.2, label="I_A band")
+    amax = mark(marks, "amplitude maximum")
+    onset = mark(marks, "saturation onset")
+    target = mark(marks, "I_A")
+    for ax in axes:
+        if amax:
+            ax.axvline(num(amax["register"]), color="r", lw=1.2,
+                       label="amplitude max (plateau start)")
+        if onset:
+            ax.axvline(num(onset["register"]), color="k", ls=":", lw=0.8, label="saturation onset")
+    if target:
+        axes[2].axhline(num(target["mean_intensity"]), color="g", lw=0.8, label="I_A")
+        axes[2].axvline(num(target["register"]), color="g", ls="--", lw=0.8, label="c_0")
+    axes[2].axhspan(15000, 18000, color="g", alpha=0.15, label="paper's I_A band")
     for ax in axes:
         ax.set_xlabel("integration-time register (x 255 us)")
     axes[1].legend(fontsize=7)
@@ -115,6 +133,50 @@ def fig67():
         ax3.set_ylabel("passing pixels", color="r")
         fig.suptitle(f"{name}: {scene}")
         save(fig, name)
+
+
+def fig2():
+    rows = load("fig2_scattering_bias")
+    if not rows:
+        return
+    img = [[num(v) * 1e3 for v in r.values()] for r in rows]
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    im = ax.imshow(img, cmap="RdBu", vmin=-200, vmax=200, interpolation="nearest")
+    ax.set_title("scattering bias of the background, 15 ms [mm]\n"
+                 "(noise-free, PSF on - off; blank: hand, saturated, edges)", fontsize=8)
+    fig.colorbar(im, ax=ax, fraction=0.04)
+    save(fig, "fig2_bias")
+
+
+def fig89():
+    rows = load("fig89_distance")
+    if not rows:
+        return
+    d = col(rows, "wall m")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    px = col(rows, "wall px")
+    axes[0].plot(d, [a / b for a, b in zip(col(rows, "wall > 5 cm"), px)], "o-",
+                 label="wall biased > 5 cm")
+    axes[0].plot(d, [a / b for a, b in zip(col(rows, "wall > 20 cm"), px)], "s-",
+                 label="wall biased > 20 cm")
+    axes[0].plot(d, col(rows, "wall amplitude with / without scattering"), "k^--",
+                 label="wall amplitude with / without scattering (median)")
+    axes[0].set_xlabel("wall distance [m]")
+    axes[0].set_ylabel("fraction / ratio")
+    axes[0].legend(fontsize=7)
+    axes[1].plot(d, col(rows, "removed (wall > 5 cm)"), "o-", label="removed: wall > 5 cm")
+    axes[1].plot(d, col(rows, "removed (wall > 20 cm)"), "s-", label="removed: wall > 20 cm")
+    axes[1].plot(d, col(rows, "removed (background > 20 cm)"), "d-",
+                 label="removed: background (wall + floor) > 20 cm")
+    axes[1].plot(d, col(rows, "wall unbiased kept"), "k^--", label="kept: unbiased wall")
+    axes[1].set_xlabel("wall distance [m]")
+    axes[1].set_ylabel("fraction (accuracy filter, 0.07 m)")
+    axes[1].set_ylim(-0.02, 1.02)
+    axes[1].legend(fontsize=7)
+    for ax in axes:
+        # Where the hand's and the wall's phasors oppose (L/2 + 0.2 m).
+        ax.axvline(7.4948 / 2 + 0.2, color="grey", lw=0.6, ls=":")
+    save(fig, "fig89_distance")
 
 
 def calibration():
@@ -181,15 +243,23 @@ def filters():
     rows = load("filters_pr")
     if not rows:
         return
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+
+    def group(r):
+        # One curve per filter; the cloud filters sweep two parameters, one curve per k / r.
+        if r["filter"] in ("sor", "radius"):
+            return r["filter"] + " " + r["parameter"].split(",")[0]
+        return r["filter"]
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
     names = []
     for r in rows:
-        if r["filter"] not in names:
-            names.append(r["filter"])
+        if group(r) not in names:
+            names.append(group(r))
     for ax, suffix, title in ((axes[0], "5cm", "bad = |error| > 5 cm"),
                               (axes[1], "3sigma", "bad = |error| > 3 true sigma")):
+        ax.set_prop_cycle(color=plt.cm.tab20.colors)  # more curves than the default 10 colours
         for n in names:
-            rr = [r for r in rows if r["filter"] == n]
+            rr = [r for r in rows if group(r) == n]
             ax.plot(col(rr, "recall_" + suffix), col(rr, "precision_" + suffix), "o-", ms=3,
                     label=n)
         ax.set_xlabel("recall")
@@ -197,7 +267,7 @@ def filters():
         ax.set_title(title, fontsize=9)
         ax.set_xlim(0, 1.02)
         ax.set_ylim(0, 1.02)
-    axes[0].legend(fontsize=7)
+    axes[0].legend(fontsize=6, ncol=2)
     save(fig, "filters_pr")
 
 
@@ -215,5 +285,5 @@ def real_data():
     save(fig, "real_data")
 
 
-for plot in (fig3, fig5, fig67, calibration, controllers, filters, real_data):
+for plot in (fig2, fig3, fig5, fig67, fig89, calibration, controllers, filters, real_data):
     plot()

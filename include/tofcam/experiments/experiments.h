@@ -78,4 +78,9 @@ void WriteExperimentFiles(const ExperimentResult& result, const std::filesystem:
 [[nodiscard]] std::string ExperimentMarkdown(const ExperimentResult& result,
                                              const std::string& image_prefix);
 
+/// The opening of results.md: title, set-up and what every table depends on, from the measured
+/// metrics of `results` (notes whose experiments did not run are left out).
+[[nodiscard]] std::string ResultsPreamble(const std::vector<ExperimentResult>& results,
+                                          const ExperimentOptions& options);
+
 }  // namespace tofcam::experiments
