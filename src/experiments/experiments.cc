@@ -238,7 +238,7 @@ std::vector<SweepRow> RegisterSweep(const std::string& spec, const std::vector<i
       // clipped (amplitude 0, no phase, full-scale intensity); the distance statistics only
       // over pixels with a phase.
       const bool valid = f.flags[i].Valid();
-      if (!valid && !(f.intensity[i] >= kClippedIntensity)) continue;
+      if (!CountsForExposure(f, i, kRejectMask, kClippedIntensity)) continue;
       ++n;
       sa += f.amplitude[i];
       si += f.intensity[i];
@@ -568,7 +568,8 @@ ExperimentResult Fig67(const ExperimentOptions& o) {
         PipelineResult res = pipeline.Process(*camera.Grab());
         const MetricFrame& f = res.frame;
         for (std::size_t i = 0; i < f.amplitude.size(); ++i) {
-          if (res.input_flags[i].Valid() || f.intensity[i] >= kClippedIntensity) {
+          if (res.input_flags[i].Valid() ||
+              CountsForExposure(f, i, kRejectMask, kClippedIntensity)) {
             amp_sum += f.amplitude[i];
             int_sum += f.intensity[i];
             ++amp_n;

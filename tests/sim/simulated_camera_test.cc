@@ -267,8 +267,8 @@ TEST(SimulatedCameraTest, BloomingRaisesOffsetNotAmplitudeAndAddsItsShotNoise) {
     i_without += fo.intensity[p];
     a_with += fw.amplitude[p];
     a_without += fo.amplitude[p];
-    max_shift_m = std::max(max_shift_m, std::abs(std::remainder(
-                                            Metres(fw.distance[p]) - Metres(fo.distance[p]), kL)));
+    max_shift_m = std::max(
+        max_shift_m, std::abs(std::remainder(Metres(fw.distance[p]) - Metres(fo.distance[p]), kL)));
   }
   EXPECT_GT(i_with, 1.5 * i_without);  // the spill is larger than the wall's own offset here
   EXPECT_NEAR(a_with / a_without, 1.0, 2e-3);  // register rounding only
