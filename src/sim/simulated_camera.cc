@@ -144,11 +144,11 @@ void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
   for (int r = 0; r < h; ++r) {
     const float* in = &img[static_cast<std::size_t>(r) * w];
     float* out = &tmp[static_cast<std::size_t>(r) * w];
-    for (int c = 0; c < w; ++c) {
-      const int lo = std::max(-radius, -c), hi = std::min(radius, w - 1 - c);
-      float acc = 0;
-      for (int i = lo; i <= hi; ++i) acc += k[i + radius] * in[c + i];
-      out[c] = acc;
+    // Tap by tap over the columns it reaches (vectorises); every output still sums its taps in
+    // increasing order from 0, so the result is the same as a per-pixel loop.
+    for (int i = -radius; i <= radius; ++i) {
+      const float kv = k[i + radius];
+      for (int c = std::max(0, -i); c < std::min(w, w - i); ++c) out[c] += kv * in[c + i];
     }
   }
   for (int r = 0; r < h; ++r) {
@@ -206,11 +206,10 @@ struct RayBatch {
   }
 };
 
-// Intersects rays [0, n) of `b`, all from `org`, in packets of K. Packet position j takes ray
-// order[j] for j < n_order and ray j beyond.
+// Intersects rays [0, n) of `b`, all from `org`, in packets of K consecutive rays.
 template <int K>
 void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
-            const unsigned* order, std::size_t n_order, RayBatch& b) {
+            RayBatch& b) {
   typename Packet<K>::RayHit rh{};
   alignas(64) int valid[K];
   for (int l = 0; l < K; ++l) {
@@ -222,12 +221,9 @@ void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
   }
   for (std::size_t q = 0; q < n; q += K) {
     const std::size_t m = std::min<std::size_t>(K, n - q);
-    std::size_t index[K];
     for (int l = 0; l < K; ++l) {
       const bool on = static_cast<std::size_t>(l) < m;
-      const std::size_t j = on ? q + l : q;  // inactive lanes repeat a valid ray
-      const std::size_t i = j < n_order ? order[j] : j;
-      index[l] = i;
+      const std::size_t i = on ? q + l : q;  // inactive lanes repeat a valid ray
       valid[l] = on ? -1 : 0;
       rh.ray.dir_x[l] = b.dx[i];
       rh.ray.dir_y[l] = b.dy[i];
@@ -237,14 +233,11 @@ void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
       rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
     }
     Packet<K>::Intersect(valid, scene, ctx, &rh);
-    for (std::size_t l = 0; l < m; ++l) {
-      const std::size_t i = index[l];
-      b.t[i] = rh.ray.tfar[l];
-      b.geom[i] = rh.hit.geomID[l];
-      b.nx[i] = rh.hit.Ng_x[l];
-      b.ny[i] = rh.hit.Ng_y[l];
-      b.nz[i] = rh.hit.Ng_z[l];
-    }
+    std::copy_n(rh.ray.tfar, m, &b.t[q]);
+    std::copy_n(rh.hit.geomID, m, &b.geom[q]);
+    std::copy_n(rh.hit.Ng_x, m, &b.nx[q]);
+    std::copy_n(rh.hit.Ng_y, m, &b.ny[q]);
+    std::copy_n(rh.hit.Ng_z, m, &b.nz[q]);
   }
 }
 
@@ -276,15 +269,27 @@ void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
   }
 }
 
+// The hot row loops below are compiled twice, for the x86-64 baseline (SSE2) and for AVX2, and
+// the dynamic loader picks one for the CPU (GCC/Clang function multiversioning); the library
+// stays built for the baseline. Both clones do the same IEEE operations in the same order (ISO
+// C++ mode contracts no FMAs, AVX2 alone enables none), so results do not depend on the CPU.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define TOFCAM_SIM_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define TOFCAM_SIM_CLONES
+#endif
+
 // The loops below take __restrict pointers: without them GCC needs more run-time alias checks
 // than it is willing to emit and leaves them scalar. They are kept out of line (noinline),
 // because GCC forgets the __restrict of parameters once a function is inlined into a caller.
 
 // (dx, dy, dz) = rot * (x, y, z) for n directions.
-[[gnu::noinline]] void RotateArrays(const Eigen::Matrix3f& rot, const float* __restrict x,
-                                    const float* __restrict y, const float* __restrict z,
-                                    std::size_t n, float* __restrict dx, float* __restrict dy,
-                                    float* __restrict dz) {
+[[gnu::noinline]] TOFCAM_SIM_CLONES void RotateArrays(const Eigen::Matrix3f& rot,
+                                                      const float* __restrict x,
+                                                      const float* __restrict y,
+                                                      const float* __restrict z, std::size_t n,
+                                                      float* __restrict dx, float* __restrict dy,
+                                                      float* __restrict dz) {
   const float r00 = rot(0, 0), r01 = rot(0, 1), r02 = rot(0, 2);
   const float r10 = rot(1, 0), r11 = rot(1, 1), r12 = rot(1, 2);
   const float r20 = rot(2, 0), r21 = rot(2, 1), r22 = rot(2, 2);
@@ -296,10 +301,10 @@ void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
 }
 
 // Cosine of incidence |n . d| / |n| (at most 1) for n rays; garbage where the ray missed.
-[[gnu::noinline]] void CosIncidence(std::size_t n, const float* __restrict nx,
-                                    const float* __restrict ny, const float* __restrict nz,
-                                    const float* __restrict dx, const float* __restrict dy,
-                                    const float* __restrict dz, float* __restrict cos_i) {
+[[gnu::noinline]] TOFCAM_SIM_CLONES void CosIncidence(
+    std::size_t n, const float* __restrict nx, const float* __restrict ny,
+    const float* __restrict nz, const float* __restrict dx, const float* __restrict dy,
+    const float* __restrict dz, float* __restrict cos_i) {
   for (std::size_t i = 0; i < n; ++i) {
     const float len = std::sqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
     cos_i[i] = std::min(1.f, std::abs(nx[i] * dx[i] + ny[i] * dy[i] + nz[i] * dz[i]) / len);
@@ -308,9 +313,10 @@ void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
 
 // Per subsample: active electrons/s = weight / d^2 (written back into weight) and the modulated
 // phasor contrast * active * exp(i 2 pi d / L).
-[[gnu::noinline]] void Phasors(std::size_t n, float inv_range, float contrast,
-                               const float* __restrict dist, float* __restrict weight,
-                               float* __restrict re, float* __restrict im) {
+[[gnu::noinline]] TOFCAM_SIM_CLONES void Phasors(std::size_t n, float inv_range, float contrast,
+                                                 const float* __restrict dist,
+                                                 float* __restrict weight, float* __restrict re,
+                                                 float* __restrict im) {
   for (std::size_t i = 0; i < n; ++i) {
     const float d = dist[i];
     const float active = weight[i] / (d * d);
@@ -322,77 +328,125 @@ void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
   }
 }
 
+// cos^n for the glossy subsamples of a row, n[k] >= 0 whole numbers below 2^bits: binary
+// exponentiation in double precision (the float nearest cos^n, see internal::PowInt) with the
+// same `bits` squarings for every lane and a bit-mask select of the factor, so it vectorises.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void PowIntRow(std::size_t m, int bits,
+                                                   const float* __restrict x,
+                                                   const int* __restrict n, double* __restrict base,
+                                                   double* __restrict result) {
+  for (std::size_t k = 0; k < m; ++k) {
+    base[k] = x[k];
+    result[k] = 1.0;
+  }
+  for (int bit = 0; bit < bits; ++bit) {
+    for (std::size_t k = 0; k < m; ++k) {
+      const std::uint64_t take = 0 - static_cast<std::uint64_t>((n[k] >> bit) & 1);
+      const std::uint64_t factor = (std::bit_cast<std::uint64_t>(base[k]) & take) |
+                                   (std::bit_cast<std::uint64_t>(1.0) & ~take);
+      result[k] *= std::bit_cast<double>(factor);
+      base[k] *= base[k];
+    }
+  }
+}
+
 // Per subsample of a row (g = object hit or RTC_INVALID_GEOMETRY_ID): the active electrons/s
 // before the 1/d^2 falloff, weight = I(alpha) K cos^4 / S^2 * brdf * cos(incidence) with
 // brdf = albedo / pi + glossy cos^n; the distance (1 on a miss, where the weight is 0); the
 // background electrons/s. Misses read the zero entry n_obj of the material arrays. The gathers
-// are scalar but branch-free; the glossy lobe is raised only for the (few) subsamples on glossy
-// materials, listed in `glossy_at`; the rest vectorises. lobe, x: scratch.
-[[gnu::noinline]] void ShadeSurfaces(std::size_t n, unsigned n_obj, const unsigned* __restrict geom,
-                                     const float* __restrict t, const float* __restrict cos_in,
-                                     const float* __restrict active, const float* __restrict bg_k,
-                                     const float* __restrict diffuse,
-                                     const float* __restrict glossy, const float* __restrict shine,
-                                     const int* __restrict power, const float* __restrict radiance,
-                                     float* __restrict weight, float* __restrict dist,
-                                     float* __restrict bg, float* __restrict lobe,
-                                     float* __restrict x, unsigned* __restrict glossy_at) {
+// are scalar but branch-free; the rest vectorises. The subsamples on glossy materials are listed
+// in `glossy_at` (n_glossy of them) and their cosines in `glossy_x`; the caller adds the lobe.
+[[gnu::noinline]] TOFCAM_SIM_CLONES std::size_t ShadeSurfaces(
+    std::size_t n, unsigned n_obj, const unsigned* __restrict geom, const float* __restrict t,
+    const float* __restrict cos_in, const float* __restrict bg_k, const float* __restrict diffuse,
+    const float* __restrict glossy, const float* __restrict radiance, float* __restrict brdf,
+    float* __restrict cos_out, float* __restrict dist, float* __restrict bg,
+    unsigned* __restrict glossy_at) {
   std::size_t n_glossy = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const bool hit = geom[i] != RTC_INVALID_GEOMETRY_ID;
     const unsigned g = hit ? geom[i] : n_obj;
-    x[i] = hit ? cos_in[i] : 0.f;  // the normal of a miss is garbage
-    weight[i] = diffuse[g];
-    lobe[i] = 0.f;
+    cos_out[i] = hit ? cos_in[i] : 0.f;  // the normal of a miss is garbage
+    brdf[i] = diffuse[g];
     dist[i] = hit ? t[i] : 1.f;
     bg[i] = bg_k[i] * radiance[g];
     glossy_at[n_glossy] = static_cast<unsigned>(i);
     n_glossy += glossy[g] > 0 ? 1 : 0;
   }
-  for (std::size_t k = 0; k < n_glossy; ++k) {
-    const std::size_t i = glossy_at[k];
-    const unsigned g = geom[i];
-    const float cos_i = x[i];
-    if (!(cos_i > 0)) continue;
-    lobe[i] = glossy[g] * (power[g] >= 0 ? internal::PowInt(cos_i, static_cast<unsigned>(power[g]))
-                                         : std::exp2(shine[g] * std::log2(cos_i)));
-  }
-  for (std::size_t i = 0; i < n; ++i) weight[i] = active[i] * (weight[i] + lobe[i]) * x[i];
+  return n_glossy;
 }
 
-// Per pixel of a row: the sums of its S^2 subsample planes (phasor, DC = active + background)
-// and the span of the subsample distances (inf when some but not all miss, 0 when all miss).
-// dmax and tmax are scratch rows.
-[[gnu::noinline]] void SumSubsamples(int width, int s2, const float* __restrict re,
-                                     const float* __restrict im, const float* __restrict active,
-                                     const float* __restrict bg, const float* __restrict t,
-                                     float* __restrict out_re, float* __restrict out_im,
-                                     float* __restrict out_dc, float* __restrict span,
-                                     float* __restrict dmax, float* __restrict tmax) {
-  for (int c = 0; c < width; ++c) {
-    out_re[c] = re[c];
-    out_im[c] = im[c];
-    out_dc[c] = active[c] + bg[c];
-    span[c] = t[c];                      // dmin over the hits: a miss (inf) never lowers it
-    dmax[c] = t[c] < kInf ? t[c] : 0.f;  // dmax over the hits
-    tmax[c] = t[c];                      // inf when some subsample missed
-  }
-  for (int s = 1; s < s2; ++s) {
-    const std::size_t o = static_cast<std::size_t>(s) * width;
-    for (int c = 0; c < width; ++c) {
-      out_re[c] += re[o + c];
-      out_im[c] += im[o + c];
-      out_dc[c] += active[o + c] + bg[o + c];
-      const float ts = t[o + c];
-      span[c] = std::min(span[c], ts);
-      dmax[c] = std::max(dmax[c], ts < kInf ? ts : 0.f);
-      tmax[c] = std::max(tmax[c], ts);
+// weight = active * brdf * cos.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void Weights(std::size_t n, const float* __restrict active,
+                                                 const float* __restrict brdf,
+                                                 const float* __restrict cos_i,
+                                                 float* __restrict weight) {
+  for (std::size_t i = 0; i < n; ++i) weight[i] = active[i] * brdf[i] * cos_i[i];
+}
+
+// Per pixel of a row: the sums of its S^2 subsamples (phasor, DC = active + background), in
+// subsample order, and the span of the subsample distances (inf when some but not all miss, 0
+// when all miss). Blocks of G pixels as in Impl::Index(); G is a compile-time constant so the
+// inner loops become vector operations.
+template <int G>
+void SumBlocks(int width, int s2, const float* __restrict re, const float* __restrict im,
+               const float* __restrict active, const float* __restrict bg,
+               const float* __restrict t, float* __restrict out_re, float* __restrict out_im,
+               float* __restrict out_dc, float* __restrict span) {
+  for (int c0 = 0; c0 < width; c0 += G) {
+    const std::size_t base = static_cast<std::size_t>(c0) * s2;
+    float sr[G], si[G], sd[G], dmin[G], dmax[G], tmax[G];
+    for (int g = 0; g < G; ++g) {
+      const std::size_t i = base + g;
+      sr[g] = re[i];
+      si[g] = im[i];
+      sd[g] = active[i] + bg[i];
+      dmin[g] = t[i];                      // over the hits: a miss (inf) never lowers it
+      dmax[g] = t[i] < kInf ? t[i] : 0.f;  // over the hits
+      tmax[g] = t[i];                      // inf when some subsample missed
+    }
+    for (int s = 1; s < s2; ++s) {
+      for (int g = 0; g < G; ++g) {
+        const std::size_t i = base + static_cast<std::size_t>(s) * G + g;
+        sr[g] += re[i];
+        si[g] += im[i];
+        sd[g] += active[i] + bg[i];
+        const float ts = t[i];
+        dmin[g] = std::min(dmin[g], ts);
+        dmax[g] = std::max(dmax[g], ts < kInf ? ts : 0.f);
+        tmax[g] = std::max(tmax[g], ts);
+      }
+    }
+    for (int g = 0; g < G; ++g) {
+      out_re[c0 + g] = sr[g];
+      out_im[c0 + g] = si[g];
+      out_dc[c0 + g] = sd[g];
+      const float missed = dmax[g] > 0 ? kInf : 0.f;
+      span[c0 + g] = tmax[g] < kInf ? dmax[g] - dmin[g] : missed;
     }
   }
-  for (int c = 0; c < width; ++c) {
-    const float dmin = span[c], dm = dmax[c], tm = tmax[c];
-    const float missed = dm > 0 ? kInf : 0.f;
-    span[c] = tm < kInf ? dm - dmin : missed;
+}
+
+[[gnu::noinline]] TOFCAM_SIM_CLONES void SumSubsamples(
+    int group, int width, int s2, const float* __restrict re, const float* __restrict im,
+    const float* __restrict active, const float* __restrict bg, const float* __restrict t,
+    float* __restrict out_re, float* __restrict out_im, float* __restrict out_dc,
+    float* __restrict span) {
+  switch (group) {
+    case 16:
+      SumBlocks<16>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    case 8:
+      SumBlocks<8>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    case 4:
+      SumBlocks<4>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    case 2:
+      SumBlocks<2>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    default:
+      SumBlocks<1>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
   }
 }
 
@@ -461,13 +515,12 @@ inline void PixelMean(const SensorConstants& k, float re, float im, float dc, fl
 // (cos, sin) of the measured phase including the systematic distance errors (fixed pattern,
 // wiggling, drift, exposure offset). Vectorised; pixels whose shift leaves the polynomial's range
 // are redone exactly.
-[[gnu::noinline]] void PixelMeans(const SensorConstants& k, int n, const float* __restrict re,
-                                  const float* __restrict im, const float* __restrict dc,
-                                  const float* __restrict sre, const float* __restrict sim,
-                                  const float* __restrict sdc, const float* __restrict fpn,
-                                  double* __restrict a_out, double* __restrict b_out,
-                                  double* __restrict cos_out, double* __restrict sin_out,
-                                  double* __restrict shift) {
+[[gnu::noinline]] TOFCAM_SIM_CLONES void PixelMeans(
+    const SensorConstants& k, int n, const float* __restrict re, const float* __restrict im,
+    const float* __restrict dc, const float* __restrict sre, const float* __restrict sim,
+    const float* __restrict sdc, const float* __restrict fpn, double* __restrict a_out,
+    double* __restrict b_out, double* __restrict cos_out, double* __restrict sin_out,
+    double* __restrict shift) {
   for (int c = 0; c < n; ++c) {
     PixelMean(k, re[c], im[c], dc[c], sre[c], sim[c], sdc[c], fpn[c], false, a_out[c], b_out[c],
               cos_out[c], sin_out[c], shift[c]);
@@ -481,10 +534,12 @@ inline void PixelMean(const SensorConstants& k, float re, float im, float dc, fl
 }
 
 // mu_k = B + A cos(phi - k pi / 2): cos, sin, -cos, -sin, all from one rendering.
-[[gnu::noinline]] void TapMeans1(int n, const double* __restrict a, const double* __restrict b,
-                                 const double* __restrict cp, const double* __restrict sp,
-                                 double* __restrict mu0, double* __restrict mu1,
-                                 double* __restrict mu2, double* __restrict mu3) {
+[[gnu::noinline]] TOFCAM_SIM_CLONES void TapMeans1(int n, const double* __restrict a,
+                                                   const double* __restrict b,
+                                                   const double* __restrict cp,
+                                                   const double* __restrict sp,
+                                                   double* __restrict mu0, double* __restrict mu1,
+                                                   double* __restrict mu2, double* __restrict mu3) {
   for (int c = 0; c < n; ++c) {
     mu0[c] = b[c] + a[c] * cp[c];
     mu1[c] = b[c] + a[c] * sp[c];
@@ -516,13 +571,12 @@ void TapMeans(int n, int slots, SensorRow& sr) {
 
 // Per pixel of a row: the standard deviations of the merged shot and read noise of each tap and
 // the ground-truth sigma L sqrt(B + s^2) / (2 sqrt(2) pi A) (0 without signal), vectorised.
-[[gnu::noinline]] void NoiseScales(int n, double read_var, double sigma_scale,
-                                   const double* __restrict mu0, const double* __restrict mu1,
-                                   const double* __restrict mu2, const double* __restrict mu3,
-                                   const double* __restrict a_mean, const double* __restrict b_mean,
-                                   float* __restrict sd0, float* __restrict sd1,
-                                   float* __restrict sd2, float* __restrict sd3,
-                                   float* __restrict sigma, float* __restrict noise) {
+[[gnu::noinline]] TOFCAM_SIM_CLONES void NoiseScales(
+    int n, double read_var, double sigma_scale, const double* __restrict mu0,
+    const double* __restrict mu1, const double* __restrict mu2, const double* __restrict mu3,
+    const double* __restrict a_mean, const double* __restrict b_mean, float* __restrict sd0,
+    float* __restrict sd1, float* __restrict sd2, float* __restrict sd3, float* __restrict sigma,
+    float* __restrict noise) {
   for (int c = 0; c < n; ++c) {
     // Single precision: the normal deviates these scale are floats and the truth sigma is stored
     // as one; packed float square roots are several times faster than double ones.
@@ -600,16 +654,25 @@ struct SimulatedCamera::Impl {
   std::vector<Eigen::Isometry3d> object_pose;  // last committed
   bool committed = false;
 
-  // Per subsample, camera frame, as arrays so the per-frame loops vectorise. Each image row holds
-  // S x S planes of `width` values (plane s = i S + j: subsample (i, j) of every pixel), so the
-  // per-pixel sums over subsamples are sums of contiguous planes.
+  // Per subsample, camera frame, as arrays so the per-frame loops vectorise, in the order the rays
+  // go to Embree: a row is split into blocks of `group` neighbouring pixels, and a block holds
+  // their subsample s = i S + j (i, j in 0..S-1) for s = 0, 1, .., S^2 - 1 in turn, so one packet
+  // of `packet_width` = group * S^2 rays covers group x 1 pixels (2 x 2 subsamples each at S = 2,
+  // 16 rays) and the per-pixel sums over subsamples are vector adds (see Index()).
   std::vector<float> sub_x, sub_y, sub_z;  // unit direction
   std::vector<float> sub_active;           // K * cos^4 * LED intensity / S^2
   std::vector<float> sub_bg;               // K * cos^4 / S^2
   // Per pixel: the central ray (ground truth). For odd S it is the centre subsample's ray.
   std::vector<float> center_x, center_y, center_z;
-  int packet_width = 1;               // Embree packet size the CPU runs natively (16, 8, 4 or 1)
-  std::vector<unsigned> trace_order;  // plane index of each packet position of a row
+  int packet_width = 1;  // Embree packet size the CPU runs natively (16, 8, 4 or 1)
+  int group = 1;         // pixels per block (1: pixel-major, when S^2 does not divide a packet)
+
+  // Position of subsample s of column c within a row's arrays.
+  std::size_t Index(int s, int c) const {
+    const int s2 = ss * ss;
+    return static_cast<std::size_t>(c / group) * group * s2 + static_cast<std::size_t>(s) * group +
+           c % group;
+  }
 
   Image<float> fpn_m;
   std::vector<Render> renders;  // 1 or 4 (one per tap time)
@@ -630,9 +693,11 @@ struct SimulatedCamera::Impl {
     std::vector<float> dist;    // hit distance, 1 on a miss (weight 0) so the phase stays finite
     std::vector<float> bg;      // background radiance times sub_bg
     std::vector<float> re, im;  // phasor of each subsample
-    std::vector<unsigned> glossy_at;  // subsamples on glossy materials
-    std::vector<float> span;          // two rows of scratch for the distance span
-    std::vector<int> mirrored;        // subsamples whose first hit is a mirror (bounces follow)
+    std::vector<unsigned> glossy_at;              // subsamples on glossy materials
+    std::vector<float> glossy_x;                  // their cosines of incidence
+    std::vector<int> glossy_n;                    // their whole-number shininess
+    std::vector<double> glossy_base, glossy_pow;  // cos^(2^k) and cos^n
+    std::vector<int> mirrored;  // subsamples whose first hit is a mirror (bounces follow)
     SensorRow sensor;
   };
   std::vector<Scratch> scratch;  // per thread
@@ -647,6 +712,7 @@ struct SimulatedCamera::Impl {
   // nothing, so the per-ray shading gathers without a branch.
   std::vector<float> mat_diffuse, mat_glossy, mat_shine, mat_mirror;
   std::vector<int> mat_power;  // whole-number shininess (raised by squaring), else -1
+  int power_bits = 0;          // bits of the largest mat_power
   bool any_mirror = false;
   // Scattering: reduction factor, reduced size, lobe kernels and bilinear upsampling taps.
   struct ScatterPlan {
@@ -716,6 +782,17 @@ struct SimulatedCamera::Impl {
     const int s2 = ss * ss;
     const std::size_t np = static_cast<std::size_t>(width) * height;
     for (auto* v : {&sub_x, &sub_y, &sub_z, &sub_active, &sub_bg}) v->resize(np * s2);
+    if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED)) {
+      packet_width = 16;
+    } else if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED)) {
+      packet_width = 8;
+    } else if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED)) {
+      packet_width = 4;
+    }
+    group = 1;
+    if (s2 <= packet_width && packet_width % s2 == 0 && width % (packet_width / s2) == 0) {
+      group = packet_width / s2;
+    }
     for (auto* v : {&center_x, &center_y, &center_z}) v->resize(np);
     for (int r = 0; r < height; ++r) {
       for (int c = 0; c < width; ++c) {
@@ -730,8 +807,7 @@ struct SimulatedCamera::Impl {
             const Eigen::Vector3d d = model.intrinsics.Unproject(px);
             const double cos_a = d.z();
             const double c4 = cos_a * cos_a * cos_a * cos_a;
-            // Row-major planes: all pixels' subsample (i, j) of a row are contiguous.
-            const std::size_t s = (static_cast<std::size_t>(r) * s2 + i * ss + j) * width + c;
+            const std::size_t s = static_cast<std::size_t>(r) * width * s2 + Index(i * ss + j, c);
             sub_x[s] = static_cast<float>(d.x());
             sub_y[s] = static_cast<float>(d.y());
             sub_z[s] = static_cast<float>(d.z());
@@ -739,21 +815,6 @@ struct SimulatedCamera::Impl {
             sub_active[s] = static_cast<float>(k * c4 * led_on_axis * std::pow(cos_a, m_exp) / s2);
           }
         }
-      }
-    }
-    if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED)) {
-      packet_width = 16;
-    } else if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED)) {
-      packet_width = 8;
-    } else if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED)) {
-      packet_width = 4;
-    }
-    // Packets keep the pixel-major order (the S x S subsamples of neighbouring pixels together):
-    // packet position c * S^2 + s takes the ray of plane s, column c.
-    trace_order.resize(static_cast<std::size_t>(width) * s2);
-    for (int c = 0; c < width; ++c) {
-      for (int s = 0; s < s2; ++s) {
-        trace_order[static_cast<std::size_t>(c) * s2 + s] = static_cast<unsigned>(s * width + c);
       }
     }
     PlanScatter();
@@ -802,6 +863,9 @@ struct SimulatedCamera::Impl {
       mat_glossy[i] = sm.glossy;
       mat_shine[i] = sm.shininess;
       mat_power[i] = sm.int_shininess;
+      if (sm.glossy > 0) {
+        while ((std::max(0, mat_power[i]) >> power_bits) != 0) ++power_bits;
+      }
       mat_mirror[i] = sm.mirror;
       any_mirror = any_mirror || sm.mirror > 0;
     }
@@ -889,19 +953,18 @@ struct SimulatedCamera::Impl {
     return rh.ray.tfar;
   }
 
-  // Intersects the first n rays of `b` (all from org) in the CPU's native packet width; see TraceK
-  // for `order`.
+  // Intersects the first n rays of `b` (all from org) in the CPU's native packet width.
   void Trace(RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
-             const unsigned* order, std::size_t n_order, RayBatch& b) const {
+             RayBatch& b) const {
     switch (packet_width) {
       case 16:
-        TraceK<16>(rtc_scene, ctx, org, n, order, n_order, b);
+        TraceK<16>(rtc_scene, ctx, org, n, b);
         break;
       case 8:
-        TraceK<8>(rtc_scene, ctx, org, n, order, n_order, b);
+        TraceK<8>(rtc_scene, ctx, org, n, b);
         break;
       case 4:
-        TraceK<4>(rtc_scene, ctx, org, n, order, n_order, b);
+        TraceK<4>(rtc_scene, ctx, org, n, b);
         break;
       default:
         Trace1(rtc_scene, ctx, org, n, b);
@@ -963,7 +1026,6 @@ struct SimulatedCamera::Impl {
       b.Resize(nr);
       for (auto* v : {&sc.cos_i, &sc.weight, &sc.dist, &sc.bg, &sc.re, &sc.im}) v->resize(ns);
       sc.glossy_at.resize(ns);
-      sc.span.resize(2 * static_cast<std::size_t>(width));
       for (int r = r0; r < r1; ++r) {
         const std::size_t row_sub = static_cast<std::size_t>(r) * width * s2;
         const std::size_t row_px = static_cast<std::size_t>(r) * width;
@@ -972,19 +1034,22 @@ struct SimulatedCamera::Impl {
           Rotate(rot, &center_x[row_px], &center_y[row_px], &center_z[row_px], width, b, ns);
         }
         // Primary rays of the row (and the truth rays) in coherent packets.
-        Trace(&ctx, org, nr, trace_order.data(), ns, b);
+        Trace(&ctx, org, nr, b);
         if (truth) {
-          const float* t =
-              truth_from_center ? &b.t[static_cast<std::size_t>(center_sub) * width] : &b.t[ns];
-          std::copy_n(t, width, &truth_distance[row_px]);
+          for (int c = 0; c < width; ++c) {
+            truth_distance[row_px + c] =
+                truth_from_center ? b.t[Index(center_sub, c)] : b.t[ns + c];
+          }
         }
         // Per subsample: cosine of incidence, BRDF, background (vectorised, no branches).
         CosIncidence(ns, b.nx.data(), b.ny.data(), b.nz.data(), b.dx.data(), b.dy.data(),
                      b.dz.data(), sc.cos_i.data());
-        ShadeSurfaces(ns, n_obj, b.geom.data(), b.t.data(), sc.cos_i.data(), &sub_active[row_sub],
-                      &sub_bg[row_sub], mat_diffuse.data(), mat_glossy.data(), mat_shine.data(),
-                      mat_power.data(), object_radiance.data(), sc.weight.data(), sc.dist.data(),
-                      sc.bg.data(), sc.re.data(), sc.im.data(), sc.glossy_at.data());
+        const std::size_t n_glossy = ShadeSurfaces(
+            ns, n_obj, b.geom.data(), b.t.data(), sc.cos_i.data(), &sub_bg[row_sub],
+            mat_diffuse.data(), mat_glossy.data(), object_radiance.data(), sc.re.data(),
+            sc.im.data(), sc.dist.data(), sc.bg.data(), sc.glossy_at.data());
+        AddGlossyLobes(n_glossy, b, sc);
+        Weights(ns, &sub_active[row_sub], sc.re.data(), sc.im.data(), sc.weight.data());
         if (lamps) {
           for (std::size_t i = 0; i < ns; ++i) {
             const unsigned g = b.geom[i];
@@ -1007,19 +1072,47 @@ struct SimulatedCamera::Impl {
         // Phasors: amplitude falls with d^2, phase 2 pi d / L (vectorised, no libm).
         Phasors(ns, inv_range, contrast, sc.dist.data(), sc.weight.data(), sc.re.data(),
                 sc.im.data());
-        SumSubsamples(width, s2, sc.re.data(), sc.im.data(), sc.weight.data(), sc.bg.data(),
+        SumSubsamples(group, width, s2, sc.re.data(), sc.im.data(), sc.weight.data(), sc.bg.data(),
                       b.t.data(), &out.re[row_px], &out.im[row_px], &out.dc[row_px],
-                      &out.span_m[row_px], sc.span.data(), sc.span.data() + width);
+                      &out.span_m[row_px]);
         std::copy_n(&out.re[row_px], width, &out.direct_re[row_px]);
         std::copy_n(&out.im[row_px], width, &out.direct_im[row_px]);
         for (int i : sc.mirrored) {
-          const std::size_t p = row_px + static_cast<std::size_t>(i) % width;
+          const std::size_t block = static_cast<std::size_t>(i) / (group * s2);
+          const std::size_t p = row_px + block * group + static_cast<std::size_t>(i) % group;
           Bounce(b, static_cast<std::size_t>(i), row_sub + i, org, ctx, lamp_on, out.re[p],
                  out.im[p], out.dc[p]);
         }
       }
     });
     if (options.scattering) Scatter(out);
+  }
+
+  // Adds glossy * cos^n to the BRDF (sc.re) of the row's subsamples on glossy materials (cosines
+  // in sc.im): whole-number shininess by exact binary exponentiation, vectorised over the
+  // subsamples; any other shininess through libm exp2(n log2 cos), one by one.
+  void AddGlossyLobes(std::size_t n_glossy, const RayBatch& b, Scratch& sc) const {
+    if (n_glossy == 0) return;
+    sc.glossy_x.resize(n_glossy);
+    sc.glossy_n.resize(n_glossy);
+    sc.glossy_base.resize(n_glossy);
+    sc.glossy_pow.resize(n_glossy);
+    for (std::size_t k = 0; k < n_glossy; ++k) {
+      const std::size_t i = sc.glossy_at[k];
+      sc.glossy_x[k] = sc.im[i];
+      sc.glossy_n[k] = std::max(0, mat_power[b.geom[i]]);
+    }
+    PowIntRow(n_glossy, power_bits, sc.glossy_x.data(), sc.glossy_n.data(), sc.glossy_base.data(),
+              sc.glossy_pow.data());
+    for (std::size_t k = 0; k < n_glossy; ++k) {
+      const std::size_t i = sc.glossy_at[k];
+      const unsigned g = b.geom[i];
+      const float cos_i = sc.glossy_x[k];
+      if (!(cos_i > 0)) continue;  // grazing: the weight is 0 anyway (times cos)
+      const float lobe = mat_power[g] >= 0 ? static_cast<float>(sc.glossy_pow[k])
+                                           : std::exp2(mat_shine[g] * std::log2(cos_i));
+      sc.re[i] += mat_glossy[g] * lobe;
+    }
   }
 
   // In-band irradiance from the switched-on lamps at a surface point (no shadows); a bulb does
@@ -1101,7 +1194,7 @@ struct SimulatedCamera::Impl {
       for (int r = r0; r < r1; ++r) {
         const std::size_t row_px = static_cast<std::size_t>(r) * width;
         Rotate(rot, &center_x[row_px], &center_y[row_px], &center_z[row_px], width, b, 0);
-        Trace(&ctx, org, width, nullptr, 0, b);
+        Trace(&ctx, org, width, b);
         std::copy(b.t.begin(), b.t.begin() + width, truth_distance.begin() + row_px);
       }
     });
