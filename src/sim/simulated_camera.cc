@@ -62,11 +62,12 @@ class RowPool {
     for (auto& w : workers_) w.join();
   }
 
-  // Runs body(row_begin, row_end, thread_index) over [0, rows).
+  // Runs body(row_begin, row_end, thread_index) over [0, rows); in parallel only when there are
+  // at least min_rows_per_thread rows per thread.
   template <typename F>
-  void Run(int rows, const F& body) {
+  void Run(int rows, const F& body, int min_rows_per_thread = 2) {
     const int threads = static_cast<int>(workers_.size()) + 1;
-    if (threads == 1 || rows < 2 * threads) {
+    if (threads == 1 || rows < min_rows_per_thread * threads) {
       body(0, rows, 0);
       return;
     }
@@ -680,7 +681,7 @@ struct SimulatedCamera::Impl {
   RenderKey truth_key;
   std::vector<float> truth_distance;
   std::vector<float> taps[4];
-  std::vector<float> tmp1, tmp2, tmp3;
+  std::vector<float> tmp2;  // scratch of Bloom's blur
   // Per pixel of the current frame: noiseless offset plus read-noise variance (electrons), the
   // denominator of the truth sigma, so blooming can add its charge to it.
   std::vector<float> truth_noise_e2;
@@ -693,6 +694,7 @@ struct SimulatedCamera::Impl {
     std::vector<float> dist;    // hit distance, 1 on a miss (weight 0) so the phase stays finite
     std::vector<float> bg;      // background radiance times sub_bg
     std::vector<float> re, im;  // phasor of each subsample
+    std::vector<float> scatter_tmp[4];            // reduced images of one scattering channel
     std::vector<unsigned> glossy_at;              // subsamples on glossy materials
     std::vector<float> glossy_x;                  // their cosines of incidence
     std::vector<int> glossy_n;                    // their whole-number shininess
@@ -1244,44 +1246,54 @@ struct SimulatedCamera::Impl {
     const int f = sp.f, rw = sp.rw, rh = sp.rh;
     const std::vector<float>* src[3] = {&out.re, &out.im, &out.dc};
     std::vector<float>* dst[3] = {&out.scat_re, &out.scat_im, &out.scat_dc};
-    std::vector<float> acc;
-    for (int ch = 0; ch < 3; ++ch) {
-      tmp1.assign(static_cast<std::size_t>(rw) * rh, 0.f);
-      for (int r = 0; r < height; ++r) {
-        float* dst_row = &tmp1[static_cast<std::size_t>(r / f) * rw];
-        const float* src_row = &(*src[ch])[static_cast<std::size_t>(r) * width];
-        for (int c0 = 0, j = 0; c0 < width; c0 += f, ++j) {
-          float a = 0;
-          for (int c = c0; c < std::min(c0 + f, width); ++c) a += src_row[c];
-          dst_row[j] += a;
-        }
-      }
-      acc.assign(tmp1.size(), 0.f);
-      for (std::size_t l = 0; l < sp.weight.size(); ++l) {
-        tmp2 = tmp1;
-        BlurInPlace(tmp2, tmp3, rw, rh, sp.kernel[l]);
-        const float wl = sp.weight[l];
-        for (std::size_t i = 0; i < acc.size(); ++i) acc[i] += wl * tmp2[i];
-      }
-      // Bilinear upsampling: interpolate along the rows of the reduced image first (each reduced
-      // row once), then between the two rows of every full row.
-      tmp3.resize(static_cast<std::size_t>(rh) * width);
-      for (int j = 0; j < rh; ++j) {
-        const float* a = &acc[static_cast<std::size_t>(j) * rw];
-        float* o = &tmp3[static_cast<std::size_t>(j) * width];
-        for (int c = 0; c < width; ++c) {
-          o[c] = (1 - sp.wx[c]) * a[sp.x0[c]] + sp.wx[c] * a[sp.x1[c]];
-        }
-      }
-      std::vector<float>& d = *dst[ch];
-      for (int r = 0; r < height; ++r) {
-        const float* a = &tmp3[static_cast<std::size_t>(sp.y0[r]) * width];
-        const float* b = &tmp3[static_cast<std::size_t>(sp.y1[r]) * width];
-        const float wy = sp.wy[r];
-        float* o = &d[static_cast<std::size_t>(r) * width];
-        for (int c = 0; c < width; ++c) o[c] = (1 - wy) * a[c] + wy * b[c];
-      }
-    }
+    // The three channels (re, im, DC) are independent: one per task on the row pool.
+    pool->Run(
+        3,
+        [&](int ch0, int ch1, int thread) {
+          Scratch& sc = scratch[thread];
+          std::vector<float>& reduced = sc.scatter_tmp[0];
+          std::vector<float>& blurred = sc.scatter_tmp[1];
+          std::vector<float>& work = sc.scatter_tmp[2];
+          std::vector<float>& acc = sc.scatter_tmp[3];
+          for (int ch = ch0; ch < ch1; ++ch) {
+            reduced.assign(static_cast<std::size_t>(rw) * rh, 0.f);
+            for (int r = 0; r < height; ++r) {
+              float* dst_row = &reduced[static_cast<std::size_t>(r / f) * rw];
+              const float* src_row = &(*src[ch])[static_cast<std::size_t>(r) * width];
+              for (int c0 = 0, j = 0; c0 < width; c0 += f, ++j) {
+                float a = 0;
+                for (int c = c0; c < std::min(c0 + f, width); ++c) a += src_row[c];
+                dst_row[j] += a;
+              }
+            }
+            acc.assign(reduced.size(), 0.f);
+            for (std::size_t l = 0; l < sp.weight.size(); ++l) {
+              blurred = reduced;
+              BlurInPlace(blurred, work, rw, rh, sp.kernel[l]);
+              const float wl = sp.weight[l];
+              for (std::size_t i = 0; i < acc.size(); ++i) acc[i] += wl * blurred[i];
+            }
+            // Bilinear upsampling: interpolate along the rows of the reduced image first (each
+            // reduced row once), then between the two rows of every full row.
+            work.resize(static_cast<std::size_t>(rh) * width);
+            for (int j = 0; j < rh; ++j) {
+              const float* a = &acc[static_cast<std::size_t>(j) * rw];
+              float* o = &work[static_cast<std::size_t>(j) * width];
+              for (int c = 0; c < width; ++c) {
+                o[c] = (1 - sp.wx[c]) * a[sp.x0[c]] + sp.wx[c] * a[sp.x1[c]];
+              }
+            }
+            std::vector<float>& d = *dst[ch];
+            for (int r = 0; r < height; ++r) {
+              const float* a = &work[static_cast<std::size_t>(sp.y0[r]) * width];
+              const float* b = &work[static_cast<std::size_t>(sp.y1[r]) * width];
+              const float wy = sp.wy[r];
+              float* o = &d[static_cast<std::size_t>(r) * width];
+              for (int c = 0; c < width; ++c) o[c] = (1 - wy) * a[c] + wy * b[c];
+            }
+          }
+        },
+        1);
   }
 
   // Over-full-well charge is charge, not light: it leaves the saturated pixel during the whole
