@@ -506,8 +506,9 @@ struct SensorRow {
   std::vector<double> a[4], b[4], cos_p[4], sin_p[4];  // per rendering (tap time)
   std::vector<double> shift;                           // phase shift (rad) of rendering 0..3
   std::vector<double> mu[4], a_mean, b_mean;
-  std::vector<float> sd[4];         // sqrt(mu_k + read variance): sigma of the merged noise
-  std::vector<float> sigma, noise;  // truth sigma (m) and its denominator B + read variance
+  std::vector<float> sd[4];           // sqrt(mu_k + read variance): sigma of the merged noise
+  std::vector<float> sigma, noise;    // truth sigma (m) and its denominator B + read variance
+  std::vector<std::uint16_t> causes;  // truth cause bits
   void Resize(int n) {
     for (int k = 0; k < 4; ++k) {
       for (auto* v : {&a[k], &b[k], &cos_p[k], &sin_p[k], &mu[k]}) v->resize(n);
@@ -516,6 +517,7 @@ struct SensorRow {
     for (auto* v : {&shift, &a_mean, &b_mean}) v->resize(n);
     sigma.resize(n);
     noise.resize(n);
+    causes.assign(n, 0);
   }
 };
 
@@ -633,6 +635,40 @@ void TapMeans(int n, int slots, SensorRow& sr) {
     // would turn into a branch around the division (keeping the loop scalar).
     const double inv_a = static_cast<double>(a_mean[c] > 0) / (a_mean[c] + 1e-300);
     sigma[c] = static_cast<float>(sigma_scale * inv_a) * std::sqrt(noise[c]);
+  }
+}
+
+// Ground-truth causes of a row from rendering 0 as flag bits (multipath, scattering, mixed, no
+// return, beyond range), branch-free so it vectorises; the same tests as Grab's `differ` for
+// cos_bias >= 0 (the caller evaluates pixel by pixel otherwise): the angle between phasors a and
+// b exceeds the bias when dot < 0 or dot^2 < cos_bias^2 |a|^2 |b|^2.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void TruthCauses(
+    int n, double cos_bias2, double t_int_s, double mixed_span_m, double range_m,
+    const float* __restrict re, const float* __restrict im, const float* __restrict dre,
+    const float* __restrict dim, const float* __restrict sre, const float* __restrict sim,
+    const float* __restrict span, const float* __restrict td, std::uint16_t* __restrict bits) {
+  const auto differ = [cos_bias2](double ar, double ai, double br, double bi) {
+    const double dot = ar * br + ai * bi;
+    const double norms2 = (ar * ar + ai * ai) * (br * br + bi * bi);
+    return (dot < 0) | (dot * dot < cos_bias2 * norms2);
+  };
+  for (int c = 0; c < n; ++c) {
+    const double ind_re = re[c] - dre[c], ind_im = im[c] - dim[c];
+    const double ind2 = ind_re * ind_re + ind_im * ind_im;
+    const double dir2 = static_cast<double>(dre[c]) * dre[c] + static_cast<double>(dim[c]) * dim[c];
+    // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct one.
+    const bool multipath = (ind2 > 0) & ((ind2 >= dir2) | differ(re[c], im[c], dre[c], dim[c]));
+    const double x_re = (re[c] + sre[c]) * t_int_s, x_im = (im[c] + sim[c]) * t_int_s;
+    const bool scattering = ((sre[c] != 0) | (sim[c] != 0)) & differ(x_re, x_im, re[c], im[c]);
+    const bool mixed = span[c] > mixed_span_m;
+    const bool no_return = !(td[c] < kInf);
+    const bool beyond = (td[c] >= range_m) & (td[c] < kInf);
+    bits[c] =
+        static_cast<std::uint16_t>((multipath ? static_cast<unsigned>(Flag::kMultipath) : 0u) |
+                                   (scattering ? static_cast<unsigned>(Flag::kScattering) : 0u) |
+                                   (mixed ? static_cast<unsigned>(Flag::kMixed) : 0u) |
+                                   (no_return ? static_cast<unsigned>(Flag::kNoReturn) : 0u) |
+                                   (beyond ? static_cast<unsigned>(Flag::kBeyondUnambiguous) : 0u));
   }
 }
 
@@ -1614,35 +1650,42 @@ std::optional<Frame> SimulatedCamera::Grab() {
       }
       // Ground truth.
       const Render& rd = im.renders[0];
+      if (cos_bias >= 0) {
+        TruthCauses(w, cos_bias * cos_bias, t_int_s, opt.truth_mixed_span_m, range, &rd.re[row],
+                    &rd.im[row], &rd.direct_re[row], &rd.direct_im[row], &rd.scat_re[row],
+                    &rd.scat_im[row], &rd.span_m[row], &im.truth_distance[row], sr.causes.data());
+      }
       for (int c = 0; c < w; ++c) {
         const std::size_t p = row + c;
-        PixelFlags causes;
-        // Truth causes from the noiseless components.
-        const double ind_re = rd.re[p] - rd.direct_re[p], ind_im = rd.im[p] - rd.direct_im[p];
-        const double ind2 = ind_re * ind_re + ind_im * ind_im;
-        const double dir2 = static_cast<double>(rd.direct_re[p]) * rd.direct_re[p] +
-                            static_cast<double>(rd.direct_im[p]) * rd.direct_im[p];
-        // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct one.
-        if (ind2 > 0 &&
-            (ind2 >= dir2 || differ(rd.re[p], rd.im[p], rd.direct_re[p], rd.direct_im[p]))) {
-          causes.Set(Flag::kMultipath);
+        PixelFlags causes(sr.causes[c]);
+        const float td = im.truth_distance[p];
+        if (cos_bias < 0) {
+          // Truth causes from the noiseless components.
+          const double ind_re = rd.re[p] - rd.direct_re[p], ind_im = rd.im[p] - rd.direct_im[p];
+          const double ind2 = ind_re * ind_re + ind_im * ind_im;
+          const double dir2 = static_cast<double>(rd.direct_re[p]) * rd.direct_re[p] +
+                              static_cast<double>(rd.direct_im[p]) * rd.direct_im[p];
+          // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct one.
+          if (ind2 > 0 &&
+              (ind2 >= dir2 || differ(rd.re[p], rd.im[p], rd.direct_re[p], rd.direct_im[p]))) {
+            causes.Set(Flag::kMultipath);
+          }
+          if (rd.scat_re[p] != 0 || rd.scat_im[p] != 0) {
+            const double re = (rd.re[p] + rd.scat_re[p]) * t_int_s;
+            const double imag = (rd.im[p] + rd.scat_im[p]) * t_int_s;
+            if (differ(re, imag, rd.re[p], rd.im[p])) causes.Set(Flag::kScattering);
+          }
+          if (rd.span_m[p] > opt.truth_mixed_span_m) causes.Set(Flag::kMixed);
+          if (!(td < kInf)) causes.Set(Flag::kNoReturn);
+          if (td >= range && td < kInf) causes.Set(Flag::kBeyondUnambiguous);
         }
-        if (rd.scat_re[p] != 0 || rd.scat_im[p] != 0) {
-          const double re = (rd.re[p] + rd.scat_re[p]) * t_int_s;
-          const double imag = (rd.im[p] + rd.scat_im[p]) * t_int_s;
-          if (differ(re, imag, rd.re[p], rd.im[p])) causes.Set(Flag::kScattering);
-        }
-        if (rd.span_m[p] > opt.truth_mixed_span_m) causes.Set(Flag::kMixed);
         for (int k = 1; k < slots; ++k) {
           if (differ(im.renders[k].re[p], im.renders[k].im[p], rd.re[p], rd.im[p])) {
             causes.Set(Flag::kMotion);
             break;
           }
         }
-        const float td = im.truth_distance[p];
         truth.radial_distance_m[p] = td;
-        if (!(td < kInf)) causes.Set(Flag::kNoReturn);
-        if (td >= range && td < kInf) causes.Set(Flag::kBeyondUnambiguous);
         truth.sigma_m[p] = sr.sigma[c];
         im.truth_noise_e2[p] = sr.noise[c];
         truth.causes[p] = causes;
