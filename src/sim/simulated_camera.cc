@@ -127,6 +127,24 @@ class RowPool {
   std::atomic<int> next_{0};
 };
 
+// Runs body(row_begin, row_end, thread_index) over [0, rows) on `threads` threads (the caller's
+// included), spawning them per call. Grab() shadows it with the camera's persistent RowPool; this
+// version stays for row loops elsewhere (e.g. if the sensor retune adds one to Bloom).
+template <typename F>
+void ParallelRows(int rows, int threads, const F& body) {
+  if (threads <= 1 || rows < 2 * threads) {
+    body(0, rows, 0);
+    return;
+  }
+  std::vector<std::thread> pool;
+  pool.reserve(static_cast<std::size_t>(threads - 1));
+  for (int t = 1; t < threads; ++t) {
+    pool.emplace_back([&, t] { body(rows * t / threads, rows * (t + 1) / threads, t); });
+  }
+  body(0, rows / threads, 0);
+  for (auto& th : pool) th.join();
+}
+
 // Normalised Gaussian kernel of radius max(1, ceil(3 sigma)).
 std::vector<float> GaussianKernel(double sigma) {
   const int radius = std::max(1, static_cast<int>(std::ceil(3 * sigma)));
@@ -275,7 +293,16 @@ void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
 // the dynamic loader picks one for the CPU (GCC/Clang function multiversioning); the library
 // stays built for the baseline. Both clones do the same IEEE operations in the same order (ISO
 // C++ mode contracts no FMAs, AVX2 alone enables none), so results do not depend on the CPU.
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// Not under AddressSanitizer, whose run time starts after the loader has called the ifunc
+// resolvers that pick the clones.
+#if defined(__SANITIZE_ADDRESS__)
+#define TOFCAM_SIM_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define TOFCAM_SIM_ASAN 1
+#endif
+#endif
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(TOFCAM_SIM_ASAN)
 #define TOFCAM_SIM_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define TOFCAM_SIM_CLONES
