@@ -533,7 +533,7 @@ struct SensorRow {
   std::vector<double> a[4], b[4], cos_p[4], sin_p[4];  // per rendering (tap time)
   std::vector<double> shift;                           // phase shift (rad) of rendering 0..3
   std::vector<double> mu[4], a_mean, b_mean;
-  std::vector<float> sd[4];           // sqrt(mu_k + read variance): sigma of the merged noise
+  std::vector<float> sd[4];           // sqrt(mu_k): sigma of the Gaussian shot noise
   std::vector<float> sigma, noise;    // truth sigma (m) and its denominator B + read variance
   std::vector<std::uint16_t> causes;  // truth cause bits
   void Resize(int n) {
@@ -642,7 +642,7 @@ void TapMeans(int n, int slots, SensorRow& sr) {
   }
 }
 
-// Per pixel of a row: the standard deviations of the merged shot and read noise of each tap and
+// Per pixel of a row: the standard deviation of the Gaussian shot noise of each tap and
 // the ground-truth sigma L sqrt(B + s^2) / (2 sqrt(2) pi A) (0 without signal), vectorised.
 [[gnu::noinline]] TOFCAM_SIM_CLONES void NoiseScales(
     int n, double read_var, double sigma_scale, const double* __restrict mu0,
@@ -653,10 +653,10 @@ void TapMeans(int n, int slots, SensorRow& sr) {
   for (int c = 0; c < n; ++c) {
     // Single precision: the normal deviates these scale are floats and the truth sigma is stored
     // as one; packed float square roots are several times faster than double ones.
-    sd0[c] = std::sqrt(static_cast<float>(std::max(mu0[c], 0.0) + read_var));
-    sd1[c] = std::sqrt(static_cast<float>(std::max(mu1[c], 0.0) + read_var));
-    sd2[c] = std::sqrt(static_cast<float>(std::max(mu2[c], 0.0) + read_var));
-    sd3[c] = std::sqrt(static_cast<float>(std::max(mu3[c], 0.0) + read_var));
+    sd0[c] = std::sqrt(static_cast<float>(std::max(mu0[c], 0.0)));
+    sd1[c] = std::sqrt(static_cast<float>(std::max(mu1[c], 0.0)));
+    sd2[c] = std::sqrt(static_cast<float>(std::max(mu2[c], 0.0)));
+    sd3[c] = std::sqrt(static_cast<float>(std::max(mu3[c], 0.0)));
     noise[c] = static_cast<float>(b_mean[c] + read_var);
     // 0 where there is no signal; a product with the condition rather than a select, which GCC
     // would turn into a branch around the division (keeping the loop scalar).
@@ -1660,18 +1660,18 @@ std::optional<Frame> SimulatedCamera::Grab() {
                   sr.noise.data());
       // Shot and read noise, one random stream per row.
       Rng rng(frame_seed ^ (static_cast<std::uint64_t>(r) * 0xA24BAED4963EE407ull));
-      const bool merged = opt.shot_noise && read_sigma > 0;
+      // Draws in the order of Rng::Poisson then the read noise, per tap: drawing shot plus read
+      // noise as one N(mu, mu + s^2) would be the same distribution with half the draws, but a
+      // different realisation, and statistics evaluated on single frames (experiments fig. 6-7)
+      // depend on the realisation.
       for (int c = 0; c < w; ++c) {
         for (int k = 0; k < 4; ++k) {
           double v = sr.mu[k][c];
-          if (merged && v >= internal::kPoissonGaussMean) {
-            // Gaussian shot noise N(mu, mu) plus independent read noise N(0, s^2) is N(mu, mu +
-            // s^2): one normal draw instead of two, the same distribution.
-            v += sr.sd[k][c] * rng.Normal();
-          } else {
-            if (opt.shot_noise) v = rng.Poisson(v);
-            if (read_sigma > 0) v += read_sigma * rng.Normal();
+          if (opt.shot_noise) {
+            // Rng::Poisson with sqrt(mean) precomputed (vectorised) in the Gaussian regime.
+            v = v >= internal::kPoissonGaussMean ? v + sr.sd[k][c] * rng.Normal() : rng.Poisson(v);
           }
+          if (read_sigma > 0) v += read_sigma * rng.Normal();
           im.taps[k][row + c] = static_cast<float>(v);
         }
       }
