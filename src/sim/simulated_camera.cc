@@ -652,16 +652,19 @@ void TapMeans(int n, int slots, SensorRow& sr) {
     float* __restrict noise) {
   for (int c = 0; c < n; ++c) {
     // Single precision: the normal deviates these scale are floats and the truth sigma is stored
-    // as one; packed float square roots are several times faster than double ones.
-    sd0[c] = std::sqrt(static_cast<float>(std::max(mu0[c], 0.0)));
-    sd1[c] = std::sqrt(static_cast<float>(std::max(mu1[c], 0.0)));
-    sd2[c] = std::sqrt(static_cast<float>(std::max(mu2[c], 0.0)));
-    sd3[c] = std::sqrt(static_cast<float>(std::max(mu3[c], 0.0)));
+    // as one; packed float square roots are several times faster than double ones. Only means of
+    // at least kPoissonGaussMean use them, so a negative mean (NaN here) never does; clamping it
+    // would let GCC branch on the constant sqrt(0) and keep the loop scalar.
+    sd0[c] = std::sqrt(static_cast<float>(mu0[c]));
+    sd1[c] = std::sqrt(static_cast<float>(mu1[c]));
+    sd2[c] = std::sqrt(static_cast<float>(mu2[c]));
+    sd3[c] = std::sqrt(static_cast<float>(mu3[c]));
     noise[c] = static_cast<float>(b_mean[c] + read_var);
-    // 0 where there is no signal; a product with the condition rather than a select, which GCC
-    // would turn into a branch around the division (keeping the loop scalar).
-    const double inv_a = static_cast<double>(a_mean[c] > 0) / (a_mean[c] + 1e-300);
-    sigma[c] = static_cast<float>(sigma_scale * inv_a) * std::sqrt(noise[c]);
+    // 0 where there is no signal, selected with a bit mask: GCC may turn a select (or a product
+    // with the condition) into a branch around the division, which keeps the loop scalar.
+    const float s = static_cast<float>(sigma_scale / (a_mean[c] + 1e-300)) * std::sqrt(noise[c]);
+    const std::uint32_t lit = 0u - static_cast<std::uint32_t>(a_mean[c] > 0);
+    sigma[c] = std::bit_cast<float>(std::bit_cast<std::uint32_t>(s) & lit);
   }
 }
 
