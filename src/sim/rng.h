@@ -48,6 +48,9 @@ class NormalTable {
 
 const NormalTable& GetNormalTable();
 
+/// Poisson means from which on the sampler uses the Gaussian N(mean, mean).
+inline constexpr double kPoissonGaussMean = 30.0;
+
 class Rng {
  public:
   explicit Rng(std::uint64_t seed) { Seed(seed); }
@@ -87,7 +90,7 @@ class Rng {
   /// Poisson with mean `mean` >= 0: exact (Knuth) below 30, Gaussian N(mean, mean) above.
   double Poisson(double mean) {
     if (mean <= 0) return 0;
-    if (mean >= 30.0) return mean + std::sqrt(mean) * Normal();
+    if (mean >= kPoissonGaussMean) return mean + std::sqrt(mean) * Normal();
     const double limit = std::exp(-mean);
     double p = Uniform();
     int k = 0;

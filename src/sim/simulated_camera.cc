@@ -3,14 +3,22 @@
 #include <embree3/rtcore.h>
 
 #include <algorithm>
+#include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <complex>
+#include <condition_variable>
+#include <cstdint>
+#include <cstring>
 #include <limits>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "fast_math.h"
 #include "rng.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
@@ -34,8 +42,94 @@ void Require(bool ok, const std::string& what) {
   if (!ok) throw Error(ErrorCode::kInvalidArgument, "simulator options: " + what);
 }
 
+// Persistent workers for the row-parallel loops of one camera (threads - 1 of them; the calling
+// thread works too). Rows are handed out in chunks from an atomic counter, so a busy core does not
+// hold the frame back; results never depend on which thread ran a row, because every row has its
+// own random stream and its own Embree packets (only scratch buffers are per thread). Spawning
+// threads per loop, as before, cost tens of microseconds per loop and frame.
+class RowPool {
+ public:
+  explicit RowPool(int threads) {
+    for (int t = 1; t < threads; ++t) workers_.emplace_back([this, t] { Work(t); });
+  }
+  RowPool(const RowPool&) = delete;
+  RowPool& operator=(const RowPool&) = delete;
+  ~RowPool() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    for (auto& w : workers_) w.join();
+  }
+
+  // Runs body(row_begin, row_end, thread_index) over [0, rows); in parallel only when there are
+  // at least min_rows_per_thread rows per thread.
+  template <typename F>
+  void Run(int rows, const F& body, int min_rows_per_thread = 2) {
+    const int threads = static_cast<int>(workers_.size()) + 1;
+    if (threads == 1 || rows < min_rows_per_thread * threads) {
+      body(0, rows, 0);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      body_ = &body;
+      call_ = [](const void* b, int r0, int r1, int t) { (*static_cast<const F*>(b))(r0, r1, t); };
+      rows_ = rows;
+      chunk_ = std::max(1, rows / (8 * threads));
+      next_.store(0, std::memory_order_relaxed);
+      open_ = true;
+      ++generation_;
+    }
+    wake_.notify_all();
+    Drain(0);
+    // Workers that have not joined yet (their core is busy elsewhere) are not waited for: the job
+    // closes, and only those already inside it must finish.
+    std::unique_lock<std::mutex> lock(mutex_);
+    open_ = false;
+    done_.wait(lock, [this] { return active_ == 0; });
+  }
+
+ private:
+  void Drain(int thread) {
+    for (;;) {
+      const int r0 = next_.fetch_add(chunk_, std::memory_order_relaxed);
+      if (r0 >= rows_) return;
+      call_(body_, r0, std::min(r0 + chunk_, rows_), thread);
+    }
+  }
+  void Work(int thread) {
+    std::uint64_t seen = 0;
+    for (;;) {
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        wake_.wait(lock, [&] { return stop_ || (open_ && generation_ != seen); });
+        if (stop_) return;
+        seen = generation_;
+        ++active_;
+      }
+      Drain(thread);
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (--active_ == 0) done_.notify_one();
+    }
+  }
+
+  std::vector<std::thread> workers_;
+  std::mutex mutex_;
+  std::condition_variable wake_, done_;
+  bool stop_ = false, open_ = false;
+  std::uint64_t generation_ = 0;
+  int active_ = 0;
+  const void* body_ = nullptr;
+  void (*call_)(const void*, int, int, int) = nullptr;
+  int rows_ = 0, chunk_ = 1;
+  std::atomic<int> next_{0};
+};
+
 // Runs body(row_begin, row_end, thread_index) over [0, rows) on `threads` threads (the caller's
-// included).
+// included), spawning them per call. Grab() shadows it with the camera's persistent RowPool; this
+// version stays for row loops elsewhere (e.g. if the sensor retune adds one to Bloom).
 template <typename F>
 void ParallelRows(int rows, int threads, const F& body) {
   if (threads <= 1 || rows < 2 * threads) {
@@ -51,23 +145,30 @@ void ParallelRows(int rows, int threads, const F& body) {
   for (auto& th : pool) th.join();
 }
 
-// Separable Gaussian blur with zero padding (light leaving the sensor is lost).
-void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h, double sigma) {
+// Normalised Gaussian kernel of radius max(1, ceil(3 sigma)).
+std::vector<float> GaussianKernel(double sigma) {
   const int radius = std::max(1, static_cast<int>(std::ceil(3 * sigma)));
   std::vector<float> k(2 * radius + 1);
   double sum = 0;
   for (int i = -radius; i <= radius; ++i)
     sum += k[i + radius] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
   for (auto& v : k) v = static_cast<float>(v / sum);
+  return k;
+}
+
+// Separable blur with a kernel of odd length and zero padding (light leaving the sensor is lost).
+void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
+                 const std::vector<float>& k) {
+  const int radius = static_cast<int>(k.size() / 2);
   tmp.assign(img.size(), 0.f);
   for (int r = 0; r < h; ++r) {
     const float* in = &img[static_cast<std::size_t>(r) * w];
     float* out = &tmp[static_cast<std::size_t>(r) * w];
-    for (int c = 0; c < w; ++c) {
-      const int lo = std::max(-radius, -c), hi = std::min(radius, w - 1 - c);
-      float acc = 0;
-      for (int i = lo; i <= hi; ++i) acc += k[i + radius] * in[c + i];
-      out[c] = acc;
+    // Tap by tap over the columns it reaches (vectorises); every output still sums its taps in
+    // increasing order from 0, so the result is the same as a per-pixel loop.
+    for (int i = -radius; i <= radius; ++i) {
+      const float kv = k[i + radius];
+      for (int c = std::max(0, -i); c < std::min(w, w - i); ++c) out[c] += kv * in[c + i];
     }
   }
   for (int r = 0; r < h; ++r) {
@@ -79,6 +180,525 @@ void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
       const float* in = &tmp[static_cast<std::size_t>(r + i) * w];
       for (int c = 0; c < w; ++c) out[c] += kv * in[c];
     }
+  }
+}
+
+// Separable Gaussian blur with zero padding (light leaving the sensor is lost).
+void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h, double sigma) {
+  BlurInPlace(img, tmp, w, h, GaussianKernel(sigma));
+}
+
+// Embree ray packets of K rays (4, 8, 16): the widest the CPU runs natively is chosen at run
+// time, so the library stays built for the x86-64 baseline while Embree uses AVX2 or AVX-512.
+template <int K>
+struct Packet;
+template <>
+struct Packet<4> {
+  using RayHit = RTCRayHit4;
+  static void Intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* r) {
+    rtcIntersect4(valid, s, c, r);
+  }
+};
+template <>
+struct Packet<8> {
+  using RayHit = RTCRayHit8;
+  static void Intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* r) {
+    rtcIntersect8(valid, s, c, r);
+  }
+};
+template <>
+struct Packet<16> {
+  using RayHit = RTCRayHit16;
+  static void Intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* r) {
+    rtcIntersect16(valid, s, c, r);
+  }
+};
+
+// Rays of one batch in structure-of-arrays form: directions in, hits out.
+struct RayBatch {
+  std::vector<float> dx, dy, dz;  // world directions (unit)
+  std::vector<float> t;           // hit distance, inf on a miss
+  std::vector<unsigned> geom;     // geometry id (= object index) or RTC_INVALID_GEOMETRY_ID
+  std::vector<float> nx, ny, nz;  // geometric normal, not normalised; undefined on a miss
+  void Resize(std::size_t n) {
+    for (auto* v : {&dx, &dy, &dz, &t, &nx, &ny, &nz}) v->resize(n);
+    geom.resize(n);
+  }
+};
+
+// Intersects rays [0, n) of `b`, all from `org`, in packets of K consecutive rays.
+template <int K>
+void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
+            RayBatch& b) {
+  typename Packet<K>::RayHit rh{};
+  alignas(64) int valid[K];
+  for (int l = 0; l < K; ++l) {
+    rh.ray.org_x[l] = org.x();
+    rh.ray.org_y[l] = org.y();
+    rh.ray.org_z[l] = org.z();
+    rh.ray.mask[l] = 0xFFFFFFFFu;
+    rh.ray.id[l] = static_cast<unsigned>(l);
+  }
+  for (std::size_t q = 0; q < n; q += K) {
+    const std::size_t m = std::min<std::size_t>(K, n - q);
+    for (int l = 0; l < K; ++l) {
+      const bool on = static_cast<std::size_t>(l) < m;
+      const std::size_t i = on ? q + l : q;  // inactive lanes repeat a valid ray
+      valid[l] = on ? -1 : 0;
+      rh.ray.dir_x[l] = b.dx[i];
+      rh.ray.dir_y[l] = b.dy[i];
+      rh.ray.dir_z[l] = b.dz[i];
+      rh.ray.tfar[l] = kInf;  // stays inf on a miss
+      rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
+    }
+    Packet<K>::Intersect(valid, scene, ctx, &rh);
+    std::copy_n(rh.ray.tfar, m, &b.t[q]);
+    std::copy_n(rh.hit.geomID, m, &b.geom[q]);
+    std::copy_n(rh.hit.Ng_x, m, &b.nx[q]);
+    std::copy_n(rh.hit.Ng_y, m, &b.ny[q]);
+    std::copy_n(rh.hit.Ng_z, m, &b.nz[q]);
+  }
+}
+
+// The same one ray at a time (CPUs without native packets).
+void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
+            RayBatch& b) {
+  for (std::size_t i = 0; i < n; ++i) {
+    RTCRayHit rh;
+    rh.ray.org_x = org.x();
+    rh.ray.org_y = org.y();
+    rh.ray.org_z = org.z();
+    rh.ray.dir_x = b.dx[i];
+    rh.ray.dir_y = b.dy[i];
+    rh.ray.dir_z = b.dz[i];
+    rh.ray.tnear = 0.f;
+    rh.ray.tfar = kInf;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.time = 0;
+    rh.ray.flags = 0;
+    rh.ray.id = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene, ctx, &rh);
+    b.t[i] = rh.ray.tfar;
+    b.geom[i] = rh.hit.geomID;
+    b.nx[i] = rh.hit.Ng_x;
+    b.ny[i] = rh.hit.Ng_y;
+    b.nz[i] = rh.hit.Ng_z;
+  }
+}
+
+// The hot row loops below are compiled twice, for the x86-64 baseline (SSE2) and for AVX2, and
+// the dynamic loader picks one for the CPU (GCC/Clang function multiversioning); the library
+// stays built for the baseline. Both clones do the same IEEE operations in the same order (ISO
+// C++ mode contracts no FMAs, AVX2 alone enables none), so results do not depend on the CPU.
+// Not under AddressSanitizer, whose run time starts after the loader has called the ifunc
+// resolvers that pick the clones.
+#if defined(__SANITIZE_ADDRESS__)
+#define TOFCAM_SIM_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define TOFCAM_SIM_ASAN 1
+#endif
+#endif
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(TOFCAM_SIM_ASAN)
+#define TOFCAM_SIM_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define TOFCAM_SIM_CLONES
+#endif
+
+// The loops below take __restrict pointers: without them GCC needs more run-time alias checks
+// than it is willing to emit and leaves them scalar. They are kept out of line (noinline),
+// because GCC forgets the __restrict of parameters once a function is inlined into a caller.
+
+// (dx, dy, dz) = rot * (x, y, z) for n directions.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void RotateArrays(const Eigen::Matrix3f& rot,
+                                                      const float* __restrict x,
+                                                      const float* __restrict y,
+                                                      const float* __restrict z, std::size_t n,
+                                                      float* __restrict dx, float* __restrict dy,
+                                                      float* __restrict dz) {
+  const float r00 = rot(0, 0), r01 = rot(0, 1), r02 = rot(0, 2);
+  const float r10 = rot(1, 0), r11 = rot(1, 1), r12 = rot(1, 2);
+  const float r20 = rot(2, 0), r21 = rot(2, 1), r22 = rot(2, 2);
+  for (std::size_t i = 0; i < n; ++i) {
+    dx[i] = r00 * x[i] + r01 * y[i] + r02 * z[i];
+    dy[i] = r10 * x[i] + r11 * y[i] + r12 * z[i];
+    dz[i] = r20 * x[i] + r21 * y[i] + r22 * z[i];
+  }
+}
+
+// Cosine of incidence |n . d| / |n| (at most 1) for n rays; garbage where the ray missed.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void CosIncidence(
+    std::size_t n, const float* __restrict nx, const float* __restrict ny,
+    const float* __restrict nz, const float* __restrict dx, const float* __restrict dy,
+    const float* __restrict dz, float* __restrict cos_i) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const float len = std::sqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
+    cos_i[i] = std::min(1.f, std::abs(nx[i] * dx[i] + ny[i] * dy[i] + nz[i] * dz[i]) / len);
+  }
+}
+
+// Per subsample: active electrons/s = weight / d^2 (written back into weight) and the modulated
+// phasor contrast * active * exp(i 2 pi d / L).
+[[gnu::noinline]] TOFCAM_SIM_CLONES void Phasors(std::size_t n, float inv_range, float contrast,
+                                                 const float* __restrict dist,
+                                                 float* __restrict weight, float* __restrict re,
+                                                 float* __restrict im) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const float d = dist[i];
+    const float active = weight[i] / (d * d);
+    float sn, cs;
+    internal::SinCos2Pi(d * inv_range, sn, cs);
+    weight[i] = active;
+    re[i] = contrast * active * cs;
+    im[i] = contrast * active * sn;
+  }
+}
+
+// cos^n for the glossy subsamples of a row, n[k] >= 0 whole numbers below 2^bits: binary
+// exponentiation in double precision (the float nearest cos^n, see internal::PowInt) with the
+// same `bits` squarings for every lane and a bit-mask select of the factor, so it vectorises.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void PowIntRow(std::size_t m, int bits,
+                                                   const float* __restrict x,
+                                                   const int* __restrict n, double* __restrict base,
+                                                   double* __restrict result) {
+  for (std::size_t k = 0; k < m; ++k) {
+    base[k] = x[k];
+    result[k] = 1.0;
+  }
+  for (int bit = 0; bit < bits; ++bit) {
+    for (std::size_t k = 0; k < m; ++k) {
+      const std::uint64_t take = 0 - static_cast<std::uint64_t>((n[k] >> bit) & 1);
+      const std::uint64_t factor = (std::bit_cast<std::uint64_t>(base[k]) & take) |
+                                   (std::bit_cast<std::uint64_t>(1.0) & ~take);
+      result[k] *= std::bit_cast<double>(factor);
+      base[k] *= base[k];
+    }
+  }
+}
+
+// Per subsample of a row (g = object hit or RTC_INVALID_GEOMETRY_ID): the active electrons/s
+// before the 1/d^2 falloff, weight = I(alpha) K cos^4 / S^2 * brdf * cos(incidence) with
+// brdf = albedo / pi + glossy cos^n; the distance (1 on a miss, where the weight is 0); the
+// background electrons/s. Misses read the zero entry n_obj of the material arrays. The gathers
+// are scalar but branch-free; the rest vectorises. The subsamples on glossy materials are listed
+// in `glossy_at` (n_glossy of them) and their cosines in `glossy_x`; the caller adds the lobe.
+[[gnu::noinline]] TOFCAM_SIM_CLONES std::size_t ShadeSurfaces(
+    std::size_t n, unsigned n_obj, const unsigned* __restrict geom, const float* __restrict t,
+    const float* __restrict cos_in, const float* __restrict bg_k, const float* __restrict diffuse,
+    const float* __restrict glossy, const float* __restrict radiance, float* __restrict brdf,
+    float* __restrict cos_out, float* __restrict dist, float* __restrict bg,
+    unsigned* __restrict glossy_at) {
+  std::size_t n_glossy = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool hit = geom[i] != RTC_INVALID_GEOMETRY_ID;
+    const unsigned g = hit ? geom[i] : n_obj;
+    cos_out[i] = hit ? cos_in[i] : 0.f;  // the normal of a miss is garbage
+    brdf[i] = diffuse[g];
+    dist[i] = hit ? t[i] : 1.f;
+    bg[i] = bg_k[i] * radiance[g];
+    glossy_at[n_glossy] = static_cast<unsigned>(i);
+    n_glossy += glossy[g] > 0 ? 1 : 0;
+  }
+  return n_glossy;
+}
+
+// weight = active * brdf * cos.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void Weights(std::size_t n, const float* __restrict active,
+                                                 const float* __restrict brdf,
+                                                 const float* __restrict cos_i,
+                                                 float* __restrict weight) {
+  for (std::size_t i = 0; i < n; ++i) weight[i] = active[i] * brdf[i] * cos_i[i];
+}
+
+// Per pixel of a row: the sums of its S^2 subsamples (phasor, DC = active + background), in
+// subsample order, and the span of the subsample distances (inf when some but not all miss, 0
+// when all miss). Blocks of G pixels as in Impl::Index(); G is a compile-time constant so the
+// inner loops become vector operations.
+template <int G>
+void SumBlocks(int width, int s2, const float* __restrict re, const float* __restrict im,
+               const float* __restrict active, const float* __restrict bg,
+               const float* __restrict t, float* __restrict out_re, float* __restrict out_im,
+               float* __restrict out_dc, float* __restrict span) {
+  for (int c0 = 0; c0 < width; c0 += G) {
+    const std::size_t base = static_cast<std::size_t>(c0) * s2;
+    float sr[G], si[G], sd[G], dmin[G], dmax[G], tmax[G];
+    for (int g = 0; g < G; ++g) {
+      const std::size_t i = base + g;
+      sr[g] = re[i];
+      si[g] = im[i];
+      sd[g] = active[i] + bg[i];
+      dmin[g] = t[i];                      // over the hits: a miss (inf) never lowers it
+      dmax[g] = t[i] < kInf ? t[i] : 0.f;  // over the hits
+      tmax[g] = t[i];                      // inf when some subsample missed
+    }
+    for (int s = 1; s < s2; ++s) {
+      for (int g = 0; g < G; ++g) {
+        const std::size_t i = base + static_cast<std::size_t>(s) * G + g;
+        sr[g] += re[i];
+        si[g] += im[i];
+        sd[g] += active[i] + bg[i];
+        const float ts = t[i];
+        dmin[g] = std::min(dmin[g], ts);
+        dmax[g] = std::max(dmax[g], ts < kInf ? ts : 0.f);
+        tmax[g] = std::max(tmax[g], ts);
+      }
+    }
+    for (int g = 0; g < G; ++g) {
+      out_re[c0 + g] = sr[g];
+      out_im[c0 + g] = si[g];
+      out_dc[c0 + g] = sd[g];
+      // Selected with bit masks: GCC keeps a ternary over a subtraction scalar.
+      const std::uint32_t hit_all = 0u - static_cast<std::uint32_t>(tmax[g] < kInf);
+      const float missed = dmax[g] > 0 ? kInf : 0.f;
+      span[c0 + g] =
+          std::bit_cast<float>((std::bit_cast<std::uint32_t>(dmax[g] - dmin[g]) & hit_all) |
+                               (std::bit_cast<std::uint32_t>(missed) & ~hit_all));
+    }
+  }
+}
+
+// SumBlocks<4> (the S = 2 case with 16-ray packets) written with GCC/Clang vector extensions:
+// GCC's auto-vectoriser keeps the generic version scalar here.
+void SumBlocks4(int width, int s2, const float* __restrict re, const float* __restrict im,
+                const float* __restrict active, const float* __restrict bg,
+                const float* __restrict t, float* __restrict out_re, float* __restrict out_im,
+                float* __restrict out_dc, float* __restrict span) {
+  using V = float __attribute__((vector_size(16)));
+  const auto load = [](const float* p) {
+    V v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+  };
+  const auto store = [](float* p, V v) { std::memcpy(p, &v, sizeof v); };
+  const V inf = {kInf, kInf, kInf, kInf}, zero = {0, 0, 0, 0};
+  for (int c0 = 0; c0 < width; c0 += 4) {
+    std::size_t i = static_cast<std::size_t>(c0) * s2;
+    V sr = load(re + i), si = load(im + i), sd = load(active + i) + load(bg + i);
+    V ts = load(t + i);
+    V dmin = ts, dmax = ts < inf ? ts : zero, tmax = ts;
+    for (int s = 1; s < s2; ++s) {
+      i += 4;
+      sr += load(re + i);
+      si += load(im + i);
+      sd += load(active + i) + load(bg + i);
+      ts = load(t + i);
+      dmin = ts < dmin ? ts : dmin;
+      const V hit = ts < inf ? ts : zero;
+      dmax = dmax < hit ? hit : dmax;
+      tmax = tmax < ts ? ts : tmax;
+    }
+    store(out_re + c0, sr);
+    store(out_im + c0, si);
+    store(out_dc + c0, sd);
+    const V missed = dmax > zero ? inf : zero;
+    store(span + c0, tmax < inf ? dmax - dmin : missed);
+  }
+}
+
+[[gnu::noinline]] TOFCAM_SIM_CLONES void SumSubsamples(
+    int group, int width, int s2, const float* __restrict re, const float* __restrict im,
+    const float* __restrict active, const float* __restrict bg, const float* __restrict t,
+    float* __restrict out_re, float* __restrict out_im, float* __restrict out_dc,
+    float* __restrict span) {
+  switch (group) {
+    case 16:
+      SumBlocks<16>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    case 8:
+      SumBlocks<8>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    case 4:
+      SumBlocks4(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    case 2:
+      SumBlocks<2>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      break;
+    default:
+      SumBlocks<1>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+  }
+}
+
+// Sensor stage: per-frame constants of the noiseless tap means.
+struct SensorConstants {
+  double t_int_s = 0, dark_e = 0, global_offset_m = 0;
+  double wiggle_m = 0, wiggle_cos = 1, wiggle_sin = 0;
+  double m_to_rad = 0;
+};
+
+// Per thread: one row of the sensor stage.
+struct SensorRow {
+  std::vector<double> a[4], b[4], cos_p[4], sin_p[4];  // per rendering (tap time)
+  std::vector<double> shift;                           // phase shift (rad) of rendering 0..3
+  std::vector<double> mu[4], a_mean, b_mean;
+  std::vector<float> sd[4];           // sqrt(mu_k): sigma of the Gaussian shot noise
+  std::vector<float> sigma, noise;    // truth sigma (m) and its denominator B + read variance
+  std::vector<std::uint16_t> causes;  // truth cause bits
+  void Resize(int n) {
+    for (int k = 0; k < 4; ++k) {
+      for (auto* v : {&a[k], &b[k], &cos_p[k], &sin_p[k], &mu[k]}) v->resize(n);
+      sd[k].resize(n);
+    }
+    for (auto* v : {&shift, &a_mean, &b_mean}) v->resize(n);
+    sigma.resize(n);
+    noise.resize(n);
+    causes.assign(n, 0);
+  }
+};
+
+// One pixel of PixelMeans; `exact` uses libm for the phase shift (for shifts beyond the range of
+// the polynomial).
+inline void PixelMean(const SensorConstants& k, float re, float im, float dc, float sre, float sim,
+                      float sdc, float fpn, bool exact, double& a_out, double& b_out,
+                      double& cos_out, double& sin_out, double& shift_out) {
+  const double x_re = (re + sre) * k.t_int_s;
+  const double x_im = (im + sim) * k.t_int_s;
+  b_out = (dc + sdc) * k.t_int_s + k.dark_e;
+  const double a = std::sqrt(x_re * x_re + x_im * x_im);
+  // Unit phasor of the measured phase; (0, 0) without signal, where the phase does not matter (it
+  // is multiplied by a = 0). No select (GCC would turn one into a branch and keep the loop
+  // scalar): adding 1e-300 changes no reachable amplitude (a float rate times >= 1 us of
+  // integration is > 1e-51 electrons, and 1e-300 is below its rounding).
+  const double inv_a = 1.0 / (a + 1e-300);
+  const double cr = x_re * inv_a, ci = x_im * inv_a;
+  // Wiggling: the odd harmonics make the error periodic in the measured phase phi with period
+  // L/4, wiggle_m sin(4 phi + phase); sin 4phi and cos 4phi come from cos phi and sin phi by the
+  // double-angle formulas (exact identities; no atan2 and sin per pixel).
+  const double c2 = cr * cr - ci * ci, s2 = 2 * cr * ci;
+  const double c4 = c2 * c2 - s2 * s2, s4 = 2 * c2 * s2;
+  const double offset_m =
+      k.global_offset_m + fpn + k.wiggle_m * (s4 * k.wiggle_cos + c4 * k.wiggle_sin);
+  const double shift = offset_m * k.m_to_rad;
+  double sn, cs;
+  if (exact) {
+    sn = std::sin(shift);
+    cs = std::cos(shift);
+  } else {
+    internal::SinCosSmallPoly(shift, sn, cs);
+  }
+  a_out = a;
+  cos_out = cr * cs - ci * sn;
+  sin_out = ci * cs + cr * sn;
+  shift_out = shift;
+}
+
+// Per pixel of a row of one rendering: amplitude a and offset b (electrons) and the unit phasor
+// (cos, sin) of the measured phase including the systematic distance errors (fixed pattern,
+// wiggling, drift, exposure offset). Vectorised; pixels whose shift leaves the polynomial's range
+// are redone exactly.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void PixelMeans(
+    const SensorConstants& k, int n, const float* __restrict re, const float* __restrict im,
+    const float* __restrict dc, const float* __restrict sre, const float* __restrict sim,
+    const float* __restrict sdc, const float* __restrict fpn, double* __restrict a_out,
+    double* __restrict b_out, double* __restrict cos_out, double* __restrict sin_out,
+    double* __restrict shift) {
+  for (int c = 0; c < n; ++c) {
+    PixelMean(k, re[c], im[c], dc[c], sre[c], sim[c], sdc[c], fpn[c], false, a_out[c], b_out[c],
+              cos_out[c], sin_out[c], shift[c]);
+  }
+  for (int c = 0; c < n; ++c) {
+    if (!(std::abs(shift[c]) <= internal::kSinCosSmallMax)) {
+      PixelMean(k, re[c], im[c], dc[c], sre[c], sim[c], sdc[c], fpn[c], true, a_out[c], b_out[c],
+                cos_out[c], sin_out[c], shift[c]);
+    }
+  }
+}
+
+// mu_k = B + A cos(phi - k pi / 2): cos, sin, -cos, -sin, all from one rendering.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void TapMeans1(int n, const double* __restrict a,
+                                                   const double* __restrict b,
+                                                   const double* __restrict cp,
+                                                   const double* __restrict sp,
+                                                   double* __restrict mu0, double* __restrict mu1,
+                                                   double* __restrict mu2, double* __restrict mu3) {
+  for (int c = 0; c < n; ++c) {
+    mu0[c] = b[c] + a[c] * cp[c];
+    mu1[c] = b[c] + a[c] * sp[c];
+    mu2[c] = b[c] - a[c] * cp[c];
+    mu3[c] = b[c] - a[c] * sp[c];
+  }
+}
+
+// The tap means (tap k from rendering k when there are four) and the mean amplitude and offset
+// over the renderings.
+void TapMeans(int n, int slots, SensorRow& sr) {
+  if (slots == 1) {
+    TapMeans1(n, sr.a[0].data(), sr.b[0].data(), sr.cos_p[0].data(), sr.sin_p[0].data(),
+              sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(), sr.mu[3].data());
+    std::copy_n(sr.a[0].begin(), n, sr.a_mean.begin());
+    std::copy_n(sr.b[0].begin(), n, sr.b_mean.begin());
+    return;
+  }
+  for (int c = 0; c < n; ++c) {
+    sr.mu[0][c] = sr.b[0][c] + sr.a[0][c] * sr.cos_p[0][c];
+    sr.mu[1][c] = sr.b[1][c] + sr.a[1][c] * sr.sin_p[1][c];
+    sr.mu[2][c] = sr.b[2][c] - sr.a[2][c] * sr.cos_p[2][c];
+    sr.mu[3][c] = sr.b[3][c] - sr.a[3][c] * sr.sin_p[3][c];
+    // Summed in slot order, as a running mean of a / 4 (exact scaling by a power of two).
+    sr.a_mean[c] = sr.a[0][c] * 0.25 + sr.a[1][c] * 0.25 + sr.a[2][c] * 0.25 + sr.a[3][c] * 0.25;
+    sr.b_mean[c] = sr.b[0][c] * 0.25 + sr.b[1][c] * 0.25 + sr.b[2][c] * 0.25 + sr.b[3][c] * 0.25;
+  }
+}
+
+// Per pixel of a row: the standard deviation of the Gaussian shot noise of each tap and
+// the ground-truth sigma L sqrt(B + s^2) / (2 sqrt(2) pi A) (0 without signal), vectorised.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void NoiseScales(
+    int n, double read_var, double sigma_scale, const double* __restrict mu0,
+    const double* __restrict mu1, const double* __restrict mu2, const double* __restrict mu3,
+    const double* __restrict a_mean, const double* __restrict b_mean, float* __restrict sd0,
+    float* __restrict sd1, float* __restrict sd2, float* __restrict sd3, float* __restrict sigma,
+    float* __restrict noise) {
+  for (int c = 0; c < n; ++c) {
+    // Single precision: the normal deviates these scale are floats and the truth sigma is stored
+    // as one; packed float square roots are several times faster than double ones. Only means of
+    // at least kPoissonGaussMean use them, so a negative mean (NaN here) never does; clamping it
+    // would let GCC branch on the constant sqrt(0) and keep the loop scalar.
+    sd0[c] = std::sqrt(static_cast<float>(mu0[c]));
+    sd1[c] = std::sqrt(static_cast<float>(mu1[c]));
+    sd2[c] = std::sqrt(static_cast<float>(mu2[c]));
+    sd3[c] = std::sqrt(static_cast<float>(mu3[c]));
+    noise[c] = static_cast<float>(b_mean[c] + read_var);
+    // 0 where there is no signal, selected with a bit mask: GCC may turn a select (or a product
+    // with the condition) into a branch around the division, which keeps the loop scalar.
+    const float s = static_cast<float>(sigma_scale / (a_mean[c] + 1e-300)) * std::sqrt(noise[c]);
+    const std::uint32_t lit = 0u - static_cast<std::uint32_t>(a_mean[c] > 0);
+    sigma[c] = std::bit_cast<float>(std::bit_cast<std::uint32_t>(s) & lit);
+  }
+}
+
+// Ground-truth causes of a row from rendering 0 as flag bits (multipath, scattering, mixed, no
+// return, beyond range), branch-free so it vectorises; the same tests as Grab's `differ` for
+// cos_bias >= 0 (the caller evaluates pixel by pixel otherwise): the angle between phasors a and
+// b exceeds the bias when dot < 0 or dot^2 < cos_bias^2 |a|^2 |b|^2.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void TruthCauses(
+    int n, double cos_bias2, double t_int_s, double mixed_span_m, double range_m,
+    const float* __restrict re, const float* __restrict im, const float* __restrict dre,
+    const float* __restrict dim, const float* __restrict sre, const float* __restrict sim,
+    const float* __restrict span, const float* __restrict td, std::uint16_t* __restrict bits) {
+  const auto differ = [cos_bias2](double ar, double ai, double br, double bi) {
+    const double dot = ar * br + ai * bi;
+    const double norms2 = (ar * ar + ai * ai) * (br * br + bi * bi);
+    return (dot < 0) | (dot * dot < cos_bias2 * norms2);
+  };
+  for (int c = 0; c < n; ++c) {
+    const double ind_re = re[c] - dre[c], ind_im = im[c] - dim[c];
+    const double ind2 = ind_re * ind_re + ind_im * ind_im;
+    const double dir2 = static_cast<double>(dre[c]) * dre[c] + static_cast<double>(dim[c]) * dim[c];
+    // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct one.
+    const bool multipath = (ind2 > 0) & ((ind2 >= dir2) | differ(re[c], im[c], dre[c], dim[c]));
+    const double x_re = (re[c] + sre[c]) * t_int_s, x_im = (im[c] + sim[c]) * t_int_s;
+    const bool scattering = ((sre[c] != 0) | (sim[c] != 0)) & differ(x_re, x_im, re[c], im[c]);
+    const bool mixed = span[c] > mixed_span_m;
+    const bool no_return = !(td[c] < kInf);
+    const bool beyond = (td[c] >= range_m) & (td[c] < kInf);
+    bits[c] =
+        static_cast<std::uint16_t>((multipath ? static_cast<unsigned>(Flag::kMultipath) : 0u) |
+                                   (scattering ? static_cast<unsigned>(Flag::kScattering) : 0u) |
+                                   (mixed ? static_cast<unsigned>(Flag::kMixed) : 0u) |
+                                   (no_return ? static_cast<unsigned>(Flag::kNoReturn) : 0u) |
+                                   (beyond ? static_cast<unsigned>(Flag::kBeyondUnambiguous) : 0u));
   }
 }
 
@@ -144,11 +764,25 @@ struct SimulatedCamera::Impl {
   std::vector<Eigen::Isometry3d> object_pose;  // last committed
   bool committed = false;
 
-  // Per subsample (pixel-major, ss*ss per pixel), camera frame.
-  std::vector<Eigen::Vector3f> sub_dir;
-  std::vector<float> sub_active;  // K * cos^4 * LED intensity / S^2
-  std::vector<float> sub_bg;      // K * cos^4 / S^2
-  std::vector<Eigen::Vector3f> center_dir;
+  // Per subsample, camera frame, as arrays so the per-frame loops vectorise, in the order the rays
+  // go to Embree: a row is split into blocks of `group` neighbouring pixels, and a block holds
+  // their subsample s = i S + j (i, j in 0..S-1) for s = 0, 1, .., S^2 - 1 in turn, so one packet
+  // of `packet_width` = group * S^2 rays covers group x 1 pixels (2 x 2 subsamples each at S = 2,
+  // 16 rays) and the per-pixel sums over subsamples are vector adds (see Index()).
+  std::vector<float> sub_x, sub_y, sub_z;  // unit direction
+  std::vector<float> sub_active;           // K * cos^4 * LED intensity / S^2
+  std::vector<float> sub_bg;               // K * cos^4 / S^2
+  // Per pixel: the central ray (ground truth). For odd S it is the centre subsample's ray.
+  std::vector<float> center_x, center_y, center_z;
+  int packet_width = 1;  // Embree packet size the CPU runs natively (16, 8, 4 or 1)
+  int group = 1;         // pixels per block (1: pixel-major, when S^2 does not divide a packet)
+
+  // Position of subsample s of column c within a row's arrays.
+  std::size_t Index(int s, int c) const {
+    const int s2 = ss * ss;
+    return static_cast<std::size_t>(c / group) * group * s2 + static_cast<std::size_t>(s) * group +
+           c % group;
+  }
 
   Image<float> fpn_m;
   std::vector<Render> renders;  // 1 or 4 (one per tap time)
@@ -156,17 +790,49 @@ struct SimulatedCamera::Impl {
   RenderKey truth_key;
   std::vector<float> truth_distance;
   std::vector<float> taps[4];
-  std::vector<float> tmp1, tmp2, tmp3;
+  std::vector<float> tmp2;  // scratch of Bloom's blur
   // Per pixel of the current frame: noiseless offset plus read-noise variance (electrons), the
   // denominator of the truth sigma, so blooming can add its charge to it.
   std::vector<float> truth_noise_e2;
   std::vector<float> bloom_mean;  // mean spilled charge per tap, electrons (blooming)
-  std::vector<std::vector<RTCRayHit>> ray_buffers;  // per thread
+  // Per thread: one row of rays and the shading terms of each ray.
+  struct Scratch {
+    RayBatch rays;
+    std::vector<float> cos_i;   // cosine of incidence
+    std::vector<float> weight;  // active electrons / s before the 1/d^2 and phase: I cos4 brdf cos
+    std::vector<float> dist;    // hit distance, 1 on a miss (weight 0) so the phase stays finite
+    std::vector<float> bg;      // background radiance times sub_bg
+    std::vector<float> re, im;  // phasor of each subsample
+    std::vector<float> scatter_tmp[4];            // reduced images of one scattering channel
+    std::vector<unsigned> glossy_at;              // subsamples on glossy materials
+    std::vector<float> glossy_x;                  // their cosines of incidence
+    std::vector<int> glossy_n;                    // their whole-number shininess
+    std::vector<double> glossy_base, glossy_pow;  // cos^(2^k) and cos^n
+    std::vector<int> mirrored;  // subsamples whose first hit is a mirror (bounces follow)
+    SensorRow sensor;
+  };
+  std::vector<Scratch> scratch;  // per thread
+  std::unique_ptr<RowPool> pool;
   // Per object: its material's shading constants in float.
   struct ShadeMaterial {
     float diffuse = 0, glossy = 0, shininess = 1, mirror = 0, emission = 0;
+    int int_shininess = -1;  // the shininess when it is a whole number <= 1024, else -1
   };
   std::vector<ShadeMaterial> shade;
+  // The same as arrays indexed by object, plus one entry of zeros at the end for rays that hit
+  // nothing, so the per-ray shading gathers without a branch.
+  std::vector<float> mat_diffuse, mat_glossy, mat_shine, mat_mirror;
+  std::vector<int> mat_power;  // whole-number shininess (raised by squaring), else -1
+  int power_bits = 0;          // bits of the largest mat_power
+  bool any_mirror = false;
+  // Scattering: reduction factor, reduced size, lobe kernels and bilinear upsampling taps.
+  struct ScatterPlan {
+    int f = 1, rw = 0, rh = 0;
+    std::vector<float> weight;  // per lobe, divided by f^2 (each reduced pixel sums f^2 pixels)
+    std::vector<std::vector<float>> kernel;  // per lobe
+    std::vector<int> x0, x1, y0, y1;
+    std::vector<float> wx, wy;
+  } scatter;
 
   ~Impl() {
     if (rtc_scene) rtcReleaseScene(rtc_scene);
@@ -226,28 +892,43 @@ struct SimulatedCamera::Impl {
     const double led_on_axis = model.led_power_w * (m_exp + 1) / (2 * kPi);  // W/sr
     const int s2 = ss * ss;
     const std::size_t np = static_cast<std::size_t>(width) * height;
-    sub_dir.resize(np * s2);
-    sub_active.resize(np * s2);
-    sub_bg.resize(np * s2);
-    center_dir.resize(np);
+    for (auto* v : {&sub_x, &sub_y, &sub_z, &sub_active, &sub_bg}) v->resize(np * s2);
+    if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED)) {
+      packet_width = 16;
+    } else if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED)) {
+      packet_width = 8;
+    } else if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED)) {
+      packet_width = 4;
+    }
+    group = 1;
+    if (s2 <= packet_width && packet_width % s2 == 0 && width % (packet_width / s2) == 0) {
+      group = packet_width / s2;
+    }
+    for (auto* v : {&center_x, &center_y, &center_z}) v->resize(np);
     for (int r = 0; r < height; ++r) {
       for (int c = 0; c < width; ++c) {
         const std::size_t p = static_cast<std::size_t>(r) * width + c;
-        center_dir[p] = model.intrinsics.Unproject({c, r}).cast<float>();
+        const Eigen::Vector3f cd = model.intrinsics.Unproject({c, r}).cast<float>();
+        center_x[p] = cd.x();
+        center_y[p] = cd.y();
+        center_z[p] = cd.z();
         for (int i = 0; i < ss; ++i) {
           for (int j = 0; j < ss; ++j) {
             const Eigen::Vector2d px(c + (j + 0.5) / ss - 0.5, r + (i + 0.5) / ss - 0.5);
             const Eigen::Vector3d d = model.intrinsics.Unproject(px);
             const double cos_a = d.z();
             const double c4 = cos_a * cos_a * cos_a * cos_a;
-            const std::size_t s = p * s2 + i * ss + j;
-            sub_dir[s] = d.cast<float>();
+            const std::size_t s = static_cast<std::size_t>(r) * width * s2 + Index(i * ss + j, c);
+            sub_x[s] = static_cast<float>(d.x());
+            sub_y[s] = static_cast<float>(d.y());
+            sub_z[s] = static_cast<float>(d.z());
             sub_bg[s] = static_cast<float>(k * c4 / s2);
             sub_active[s] = static_cast<float>(k * c4 * led_on_axis * std::pow(cos_a, m_exp) / s2);
           }
         }
       }
     }
+    PlanScatter();
     // Fixed-pattern map: a bowl reaching fpn_bowl_m at the corners plus seeded pixel spread.
     fpn_m = Image<float>(width, height, 0.f);
     if (options.fixed_pattern) {
@@ -263,7 +944,8 @@ struct SimulatedCamera::Impl {
       }
     }
     truth_distance.assign(np, kInf);
-    ray_buffers.resize(static_cast<std::size_t>(options.threads));
+    scratch.resize(static_cast<std::size_t>(options.threads));
+    pool = std::make_unique<RowPool>(options.threads);
     shade.resize(scene.objects.size());
     for (std::size_t i = 0; i < scene.objects.size(); ++i) {
       const Material& m = scene.materials.at(static_cast<std::size_t>(scene.objects[i].material));
@@ -274,8 +956,29 @@ struct SimulatedCamera::Impl {
       sm.glossy =
           options.glossy ? static_cast<float>(m.specular * (m.shininess + 8) / (8 * kPi)) : 0.f;
       sm.shininess = static_cast<float>(m.shininess);
+      if (m.shininess >= 0 && m.shininess <= 1024 && m.shininess == std::floor(m.shininess)) {
+        sm.int_shininess = static_cast<int>(m.shininess);
+      }
       sm.mirror = static_cast<float>(m.mirror);
       sm.emission = static_cast<float>(m.emission_w_m2_sr);
+    }
+    const std::size_t n_obj = scene.objects.size();
+    mat_diffuse.assign(n_obj + 1, 0.f);
+    mat_glossy.assign(n_obj + 1, 0.f);
+    mat_shine.assign(n_obj + 1, 0.f);
+    mat_mirror.assign(n_obj + 1, 0.f);
+    mat_power.assign(n_obj + 1, -1);
+    for (std::size_t i = 0; i < n_obj; ++i) {
+      const ShadeMaterial& sm = shade[i];
+      mat_diffuse[i] = sm.diffuse;
+      mat_glossy[i] = sm.glossy;
+      mat_shine[i] = sm.shininess;
+      mat_power[i] = sm.int_shininess;
+      if (sm.glossy > 0) {
+        while ((std::max(0, mat_power[i]) >> power_bits) != 0) ++power_bits;
+      }
+      mat_mirror[i] = sm.mirror;
+      any_mirror = any_mirror || sm.mirror > 0;
     }
     for (auto& t : taps) t.assign(np, 0.f);
     truth_noise_e2.assign(np, 0.f);
@@ -361,201 +1064,345 @@ struct SimulatedCamera::Impl {
     return rh.ray.tfar;
   }
 
-  // Renders rates at one time into `out` (no scattering yet).
-  void RenderAt(double time_s, double pan_rad, Render& out) {
+  // Intersects the first n rays of `b` (all from org) in the CPU's native packet width.
+  void Trace(RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
+             RayBatch& b) const {
+    switch (packet_width) {
+      case 16:
+        TraceK<16>(rtc_scene, ctx, org, n, b);
+        break;
+      case 8:
+        TraceK<8>(rtc_scene, ctx, org, n, b);
+        break;
+      case 4:
+        TraceK<4>(rtc_scene, ctx, org, n, b);
+        break;
+      default:
+        Trace1(rtc_scene, ctx, org, n, b);
+    }
+  }
+
+  // World directions of n camera-frame directions (x, y, z) into b.dx.. starting at `at`.
+  static void Rotate(const Eigen::Matrix3f& rot, const float* x, const float* y, const float* z,
+                     std::size_t n, RayBatch& b, std::size_t at) {
+    RotateArrays(rot, x, y, z, n, b.dx.data() + at, b.dy.data() + at, b.dz.data() + at);
+  }
+
+  // Renders rates at one time into `out` (no scattering yet). With `truth`, the central ray of
+  // every pixel is cast in the same batches and truth_distance is filled too (same time and pose).
+  void RenderAt(double time_s, double pan_rad, Render& out, bool truth) {
     PlaceObjects(time_s);
     const Eigen::Isometry3d pose = CameraPose(time_s, pan_rad);
     const Eigen::Matrix3f rot = pose.linear().cast<float>();
     const Eigen::Vector3f org = pose.translation().cast<float>();
     std::vector<char> lamp_on(scene.lamps.size());
-    for (std::size_t l = 0; l < scene.lamps.size(); ++l) lamp_on[l] = scene.lamps[l].OnAt(time_s);
-    const float two_pi_over_l = static_cast<float>(2 * kPi / range_m);
+    bool any_lamp = false;
+    for (std::size_t l = 0; l < scene.lamps.size(); ++l) {
+      lamp_on[l] = scene.lamps[l].OnAt(time_s);
+      any_lamp = any_lamp || lamp_on[l];
+    }
+    const bool background = options.background_light;
+    const bool lamps = background && any_lamp;
+    // Background radiance of each object apart from the lamps' light: ambient, glowing bulbs.
+    std::vector<float> object_radiance(scene.objects.size(), 0.f);
+    if (background) {
+      const float ambient = static_cast<float>(scene.ambient_irradiance_w_m2);
+      for (std::size_t g = 0; g < object_radiance.size(); ++g) {
+        object_radiance[g] = shade[g].diffuse * ambient;
+        const int bulb = static_cast<int>(g) - scene.lamp_bulb_begin;
+        if (bulb >= 0 && bulb < static_cast<int>(lamp_on.size()) && lamp_on[bulb]) {
+          object_radiance[g] += shade[g].emission;
+        }
+      }
+    }
+    const float inv_range = static_cast<float>(1.0 / range_m);
     const float contrast = static_cast<float>(model.demodulation_contrast);
-    const float ambient =
-        options.background_light ? static_cast<float>(scene.ambient_irradiance_w_m2) : 0.f;
+    const bool bounces = options.multipath && options.max_bounces > 0;
     const int s2 = ss * ss;
     const std::size_t np = static_cast<std::size_t>(width) * height;
     if (out.re.size() != np) out.Resize(np);
-    ParallelRows(height, options.threads, [&](int r0, int r1, int thread) {
+    // Odd S: the centre subsample is the pixel's central ray (same direction bit for bit).
+    const bool truth_from_center = truth && ss % 2 == 1;
+    const int center_sub = (ss / 2) * ss + ss / 2;
+    const std::size_t ns = static_cast<std::size_t>(width) * s2;  // subsample rays of a row
+    const std::size_t nr = ns + (truth && !truth_from_center ? width : 0);
+    const auto n_obj = static_cast<unsigned>(scene.objects.size());
+    object_radiance.push_back(0.f);  // rays that hit nothing
+    pool->Run(height, [&](int r0, int r1, int thread) {
       RTCIntersectContext ctx;
       rtcInitIntersectContext(&ctx);
       ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-      std::vector<RTCRayHit>& rays = ray_buffers[thread];
-      rays.resize(static_cast<std::size_t>(width) * s2);
+      Scratch& sc = scratch[thread];
+      RayBatch& b = sc.rays;
+      b.Resize(nr);
+      for (auto* v : {&sc.cos_i, &sc.weight, &sc.dist, &sc.bg, &sc.re, &sc.im}) v->resize(ns);
+      sc.glossy_at.resize(ns);
       for (int r = r0; r < r1; ++r) {
-        // Primary rays of a whole row as one coherent stream; mirror bounces go one by one.
-        for (int c = 0; c < width; ++c) {
-          for (int s = 0; s < s2; ++s) {
-            const std::size_t si = (static_cast<std::size_t>(r) * width + c) * s2 + s;
-            SetRay(rays[static_cast<std::size_t>(c) * s2 + s], org, rot * sub_dir[si], 0.f);
+        const std::size_t row_sub = static_cast<std::size_t>(r) * width * s2;
+        const std::size_t row_px = static_cast<std::size_t>(r) * width;
+        Rotate(rot, &sub_x[row_sub], &sub_y[row_sub], &sub_z[row_sub], ns, b, 0);
+        if (nr > ns) {
+          Rotate(rot, &center_x[row_px], &center_y[row_px], &center_z[row_px], width, b, ns);
+        }
+        // Primary rays of the row (and the truth rays) in coherent packets.
+        Trace(&ctx, org, nr, b);
+        if (truth) {
+          for (int c = 0; c < width; ++c) {
+            truth_distance[row_px + c] =
+                truth_from_center ? b.t[Index(center_sub, c)] : b.t[ns + c];
           }
         }
-        rtcIntersect1M(rtc_scene, &ctx, rays.data(), static_cast<unsigned>(rays.size()),
-                       sizeof(RTCRayHit));
-        for (int c = 0; c < width; ++c) {
-          const std::size_t p = static_cast<std::size_t>(r) * width + c;
-          float re = 0, im = 0, dre = 0, dim = 0, dc = 0;
-          float dmin = kInf, dmax = 0;
-          bool miss = false;
-          for (int s = 0; s < s2; ++s) {
-            const std::size_t si = p * s2 + s;
-            Eigen::Vector3f dir = rot * sub_dir[si];
-            Eigen::Vector3f o = org;
-            float path = 0, att = 1;
-            for (int bounce = 0;; ++bounce) {
-              Eigen::Vector3f n;
-              int obj = -1;
-              float t = kInf;
-              if (bounce > 0) {
-                t = Cast(o, dir, 1e-4f, ctx, n, obj);
-              } else if (const RTCRayHit& h = rays[static_cast<std::size_t>(c) * s2 + s];
-                         h.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
-                t = h.ray.tfar;
-                n = Eigen::Vector3f(h.hit.Ng_x, h.hit.Ng_y, h.hit.Ng_z).normalized();
-                obj = static_cast<int>(h.hit.geomID);
-              }
-              if (!(t < kInf)) {
-                if (bounce == 0) miss = true;
-                break;
-              }
-              path += t;
-              if (bounce == 0) {
-                dmin = std::min(dmin, t);
-                dmax = std::max(dmax, t);
-              }
-              const ShadeMaterial& m = shade[obj];
-              const float cos_i = std::min(1.f, std::abs(n.dot(dir)));
-              float brdf = m.diffuse;
-              if (m.glossy > 0 && cos_i > 0) {
-                brdf += m.glossy * std::exp2(m.shininess * std::log2(cos_i));
-              }
-              const float active = sub_active[si] * att * brdf * cos_i / (path * path);
-              const float a = contrast * active;
-              const float phase = two_pi_over_l * path;
-              const float pre = a * std::cos(phase), pim = a * std::sin(phase);
-              re += pre;
-              im += pim;
-              if (bounce == 0) {
-                dre += pre;
-                dim += pim;
-              }
-              float radiance = 0;
-              if (options.background_light) {
-                const Eigen::Vector3f hit = o + t * dir;
-                float irradiance = ambient;
-                const int bulb = obj - scene.lamp_bulb_begin;
-                for (std::size_t l = 0; l < scene.lamps.size(); ++l) {
-                  if (!lamp_on[l] || static_cast<int>(l) == bulb) continue;
-                  const Eigen::Vector3f to = scene.lamps[l].position_m.cast<float>() - hit;
-                  const float d2 = std::max(to.squaredNorm(), 1e-6f);
-                  irradiance += static_cast<float>(scene.lamps[l].ir_power_w / (4 * kPi)) *
-                                std::abs(n.dot(to)) / (d2 * std::sqrt(d2));
-                }
-                radiance = m.diffuse * irradiance;
-                if (bulb >= 0 && lamp_on[bulb]) radiance += m.emission;
-              }
-              dc += active + sub_bg[si] * att * radiance;
-              if (!options.multipath || m.mirror <= 0 || bounce >= options.max_bounces) break;
-              // Mirror: the LED light reaches the mirrored scene and returns the same way.
-              att *= m.mirror * m.mirror;
-              o = o + t * dir;
-              dir = dir - 2 * n.dot(dir) * n;
+        // Per subsample: cosine of incidence, BRDF, background (vectorised, no branches).
+        CosIncidence(ns, b.nx.data(), b.ny.data(), b.nz.data(), b.dx.data(), b.dy.data(),
+                     b.dz.data(), sc.cos_i.data());
+        const std::size_t n_glossy = ShadeSurfaces(
+            ns, n_obj, b.geom.data(), b.t.data(), sc.cos_i.data(), &sub_bg[row_sub],
+            mat_diffuse.data(), mat_glossy.data(), object_radiance.data(), sc.re.data(),
+            sc.im.data(), sc.dist.data(), sc.bg.data(), sc.glossy_at.data());
+        AddGlossyLobes(n_glossy, b, sc);
+        Weights(ns, &sub_active[row_sub], sc.re.data(), sc.im.data(), sc.weight.data());
+        if (lamps) {
+          for (std::size_t i = 0; i < ns; ++i) {
+            const unsigned g = b.geom[i];
+            if (g == RTC_INVALID_GEOMETRY_ID) continue;
+            const Eigen::Vector3f n = Eigen::Vector3f(b.nx[i], b.ny[i], b.nz[i]).normalized();
+            const Eigen::Vector3f hit = org + b.t[i] * Eigen::Vector3f(b.dx[i], b.dy[i], b.dz[i]);
+            sc.bg[i] += sub_bg[row_sub + i] * shade[g].diffuse *
+                        LampIrradiance(hit, n, static_cast<int>(g), lamp_on);
+          }
+        }
+        sc.mirrored.clear();
+        if (bounces && any_mirror) {
+          for (std::size_t i = 0; i < ns; ++i) {
+            const unsigned g = b.geom[i];
+            if (g != RTC_INVALID_GEOMETRY_ID && shade[g].mirror > 0) {
+              sc.mirrored.push_back(static_cast<int>(i));
             }
           }
-          out.re[p] = re;
-          out.im[p] = im;
-          out.direct_re[p] = dre;
-          out.direct_im[p] = dim;
-          out.dc[p] = dc;
-          out.span_m[p] = miss ? (dmax > 0 ? kInf : 0.f) : dmax - dmin;
+        }
+        // Phasors: amplitude falls with d^2, phase 2 pi d / L (vectorised, no libm).
+        Phasors(ns, inv_range, contrast, sc.dist.data(), sc.weight.data(), sc.re.data(),
+                sc.im.data());
+        SumSubsamples(group, width, s2, sc.re.data(), sc.im.data(), sc.weight.data(), sc.bg.data(),
+                      b.t.data(), &out.re[row_px], &out.im[row_px], &out.dc[row_px],
+                      &out.span_m[row_px]);
+        std::copy_n(&out.re[row_px], width, &out.direct_re[row_px]);
+        std::copy_n(&out.im[row_px], width, &out.direct_im[row_px]);
+        for (int i : sc.mirrored) {
+          const std::size_t block = static_cast<std::size_t>(i) / (group * s2);
+          const std::size_t p = row_px + block * group + static_cast<std::size_t>(i) % group;
+          Bounce(b, static_cast<std::size_t>(i), row_sub + i, org, ctx, lamp_on, out.re[p],
+                 out.im[p], out.dc[p]);
         }
       }
     });
     if (options.scattering) Scatter(out);
   }
 
+  // Adds glossy * cos^n to the BRDF (sc.re) of the row's subsamples on glossy materials (cosines
+  // in sc.im): whole-number shininess by exact binary exponentiation, vectorised over the
+  // subsamples; any other shininess through libm exp2(n log2 cos), one by one.
+  void AddGlossyLobes(std::size_t n_glossy, const RayBatch& b, Scratch& sc) const {
+    if (n_glossy == 0) return;
+    sc.glossy_x.resize(n_glossy);
+    sc.glossy_n.resize(n_glossy);
+    sc.glossy_base.resize(n_glossy);
+    sc.glossy_pow.resize(n_glossy);
+    for (std::size_t k = 0; k < n_glossy; ++k) {
+      const std::size_t i = sc.glossy_at[k];
+      sc.glossy_x[k] = sc.im[i];
+      sc.glossy_n[k] = std::max(0, mat_power[b.geom[i]]);
+    }
+    PowIntRow(n_glossy, power_bits, sc.glossy_x.data(), sc.glossy_n.data(), sc.glossy_base.data(),
+              sc.glossy_pow.data());
+    for (std::size_t k = 0; k < n_glossy; ++k) {
+      const std::size_t i = sc.glossy_at[k];
+      const unsigned g = b.geom[i];
+      const float cos_i = sc.glossy_x[k];
+      if (!(cos_i > 0)) continue;  // grazing: the weight is 0 anyway (times cos)
+      const float lobe = mat_power[g] >= 0 ? static_cast<float>(sc.glossy_pow[k])
+                                           : std::exp2(mat_shine[g] * std::log2(cos_i));
+      sc.re[i] += mat_glossy[g] * lobe;
+    }
+  }
+
+  // In-band irradiance from the switched-on lamps at a surface point (no shadows); a bulb does
+  // not light itself.
+  float LampIrradiance(const Eigen::Vector3f& hit, const Eigen::Vector3f& n, int obj,
+                       const std::vector<char>& lamp_on) const {
+    float irradiance = 0;
+    const int bulb = obj - scene.lamp_bulb_begin;
+    for (std::size_t l = 0; l < scene.lamps.size(); ++l) {
+      if (!lamp_on[l] || static_cast<int>(l) == bulb) continue;
+      const Eigen::Vector3f to = scene.lamps[l].position_m.cast<float>() - hit;
+      const float d2 = std::max(to.squaredNorm(), 1e-6f);
+      irradiance += static_cast<float>(scene.lamps[l].ir_power_w / (4 * kPi)) *
+                    std::abs(n.dot(to)) / (d2 * std::sqrt(d2));
+    }
+    return irradiance;
+  }
+
+  // Mirror paths of subsample i (batch index) whose first hit is a mirror: the LED light reaches
+  // the mirrored scene and returns the same way; every further surface adds its own phasor (not
+  // to the direct part). `si` indexes the per-subsample constants.
+  void Bounce(const RayBatch& b, std::size_t i, std::size_t si, const Eigen::Vector3f& org,
+              RTCIntersectContext& ctx, const std::vector<char>& lamp_on, float& re, float& im,
+              float& dc) const {
+    const float two_pi_over_l = static_cast<float>(2 * kPi / range_m);
+    const float contrast = static_cast<float>(model.demodulation_contrast);
+    const float ambient =
+        options.background_light ? static_cast<float>(scene.ambient_irradiance_w_m2) : 0.f;
+    Eigen::Vector3f dir(b.dx[i], b.dy[i], b.dz[i]);
+    Eigen::Vector3f n = Eigen::Vector3f(b.nx[i], b.ny[i], b.nz[i]).normalized();
+    float t = b.t[i];
+    int obj = static_cast<int>(b.geom[i]);
+    Eigen::Vector3f o = org;
+    float path = t, att = 1;
+    for (int bounce = 1;; ++bounce) {
+      const ShadeMaterial& prev = shade[obj];
+      if (prev.mirror <= 0 || bounce > options.max_bounces) break;
+      att *= prev.mirror * prev.mirror;
+      o = o + t * dir;
+      dir = dir - 2 * n.dot(dir) * n;
+      t = Cast(o, dir, 1e-4f, ctx, n, obj);
+      if (!(t < kInf)) break;
+      path += t;
+      const ShadeMaterial& m = shade[obj];
+      const float cos_i = std::min(1.f, std::abs(n.dot(dir)));
+      float brdf = m.diffuse;
+      if (m.glossy > 0 && cos_i > 0) {
+        brdf += m.glossy * std::exp2(m.shininess * std::log2(cos_i));
+      }
+      const float active = sub_active[si] * att * brdf * cos_i / (path * path);
+      const float a = contrast * active;
+      const float phase = two_pi_over_l * path;
+      re += a * std::cos(phase);
+      im += a * std::sin(phase);
+      float radiance = 0;
+      if (options.background_light) {
+        const Eigen::Vector3f hit = o + t * dir;
+        radiance = m.diffuse * (ambient + LampIrradiance(hit, n, obj, lamp_on));
+        const int bulb = obj - scene.lamp_bulb_begin;
+        if (bulb >= 0 && bulb < static_cast<int>(lamp_on.size()) && lamp_on[bulb]) {
+          radiance += m.emission;
+        }
+      }
+      dc += active + sub_bg[si] * att * radiance;
+    }
+  }
+
+  // Ground truth alone (when the taps were rendered at other times).
   void TruthAt(double time_s, double pan_rad) {
     const Eigen::Isometry3d pose = CameraPose(time_s, pan_rad);
     const Eigen::Matrix3f rot = pose.linear().cast<float>();
     const Eigen::Vector3f org = pose.translation().cast<float>();
-    ParallelRows(height, options.threads, [&](int r0, int r1, int thread) {
+    pool->Run(height, [&](int r0, int r1, int thread) {
       RTCIntersectContext ctx;
       rtcInitIntersectContext(&ctx);
       ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-      std::vector<RTCRayHit>& rays = ray_buffers[thread];
-      rays.resize(static_cast<std::size_t>(width));
+      RayBatch& b = scratch[thread].rays;
+      b.Resize(static_cast<std::size_t>(width));
       for (int r = r0; r < r1; ++r) {
-        for (int c = 0; c < width; ++c) {
-          SetRay(rays[c], org, rot * center_dir[static_cast<std::size_t>(r) * width + c], 0.f);
-        }
-        rtcIntersect1M(rtc_scene, &ctx, rays.data(), static_cast<unsigned>(width),
-                       sizeof(RTCRayHit));
-        for (int c = 0; c < width; ++c) {
-          truth_distance[static_cast<std::size_t>(r) * width + c] =
-              rays[c].hit.geomID == RTC_INVALID_GEOMETRY_ID ? kInf : rays[c].ray.tfar;
-        }
+        const std::size_t row_px = static_cast<std::size_t>(r) * width;
+        Rotate(rot, &center_x[row_px], &center_y[row_px], &center_z[row_px], width, b, 0);
+        Trace(&ctx, org, width, b);
+        std::copy(b.t.begin(), b.t.begin() + width, truth_distance.begin() + row_px);
       }
     });
   }
 
-  void Scatter(Render& out) {
-    double total = 0, min_sigma = 1e9;
+  void PlanScatter() {
+    ScatterPlan& sp = scatter;
+    double min_sigma = 1e9;
+    for (const ScatterLobe& l : model.scattering) min_sigma = std::min(min_sigma, l.sigma_px);
+    // Wide lobes are smooth: blur at 1/f resolution (f <= sigma/2) and interpolate back.
+    sp.f = std::clamp(static_cast<int>(min_sigma / 2), 1, 8);
+    const int f = sp.f;
+    sp.rw = (width + f - 1) / f;
+    sp.rh = (height + f - 1) / f;
+    sp.weight.clear();
+    sp.kernel.clear();
     for (const ScatterLobe& l : model.scattering) {
-      total += l.weight;
-      min_sigma = std::min(min_sigma, l.sigma_px);
+      if (l.weight <= 0) continue;
+      sp.weight.push_back(static_cast<float>(l.weight) / static_cast<float>(f * f));
+      sp.kernel.push_back(GaussianKernel(l.sigma_px / f));
     }
-    if (total <= 0) {
+    // Bilinear upsampling; reduced pixel (i, j) covers full pixels [f*i, f*i + f).
+    auto taps = [f](int n, int reduced, std::vector<int>& i0, std::vector<int>& i1,
+                    std::vector<float>& w) {
+      i0.resize(n);
+      i1.resize(n);
+      w.resize(n);
+      for (int x = 0; x < n; ++x) {
+        const double y = (x + 0.5) / f - 0.5;
+        i0[x] = std::clamp(static_cast<int>(std::floor(y)), 0, reduced - 1);
+        i1[x] = std::min(i0[x] + 1, reduced - 1);
+        w[x] = static_cast<float>(std::clamp(y - i0[x], 0.0, 1.0));
+      }
+    };
+    taps(width, sp.rw, sp.x0, sp.x1, sp.wx);
+    taps(height, sp.rh, sp.y0, sp.y1, sp.wy);
+  }
+
+  void Scatter(Render& out) {
+    const ScatterPlan& sp = scatter;
+    if (sp.weight.empty()) {
       std::fill(out.scat_re.begin(), out.scat_re.end(), 0.f);
       std::fill(out.scat_im.begin(), out.scat_im.end(), 0.f);
       std::fill(out.scat_dc.begin(), out.scat_dc.end(), 0.f);
       return;
     }
-    // Wide lobes are smooth: blur at 1/f resolution (f <= sigma/2) and interpolate back.
-    const int f = std::clamp(static_cast<int>(min_sigma / 2), 1, 8);
-    const int rw = (width + f - 1) / f, rh = (height + f - 1) / f;
+    const int f = sp.f, rw = sp.rw, rh = sp.rh;
     const std::vector<float>* src[3] = {&out.re, &out.im, &out.dc};
     std::vector<float>* dst[3] = {&out.scat_re, &out.scat_im, &out.scat_dc};
-    for (int ch = 0; ch < 3; ++ch) {
-      tmp1.assign(static_cast<std::size_t>(rw) * rh, 0.f);
-      for (int r = 0; r < height; ++r) {
-        float* dst_row = &tmp1[static_cast<std::size_t>(r / f) * rw];
-        const float* src_row = &(*src[ch])[static_cast<std::size_t>(r) * width];
-        for (int c0 = 0, j = 0; c0 < width; c0 += f, ++j) {
-          float acc = 0;
-          for (int c = c0; c < std::min(c0 + f, width); ++c) acc += src_row[c];
-          dst_row[j] += acc;
-        }
-      }
-      std::vector<float> acc(tmp1.size(), 0.f);
-      for (const ScatterLobe& l : model.scattering) {
-        if (l.weight <= 0) continue;
-        tmp2 = tmp1;
-        BlurInPlace(tmp2, tmp3, rw, rh, l.sigma_px / f);
-        for (std::size_t i = 0; i < acc.size(); ++i)
-          acc[i] += static_cast<float>(l.weight) * tmp2[i];
-      }
-      // Bilinear upsampling; reduced pixel (i, j) covers full pixels [f*i, f*i + f).
-      std::vector<float>& d = *dst[ch];
-      for (int r = 0; r < height; ++r) {
-        const double y = (r + 0.5) / f - 0.5;
-        const int y0 = std::clamp(static_cast<int>(std::floor(y)), 0, rh - 1),
-                  y1 = std::min(y0 + 1, rh - 1);
-        const float wy = static_cast<float>(std::clamp(y - y0, 0.0, 1.0));
-        for (int c = 0; c < width; ++c) {
-          const double x = (c + 0.5) / f - 0.5;
-          const int x0 = std::clamp(static_cast<int>(std::floor(x)), 0, rw - 1),
-                    x1 = std::min(x0 + 1, rw - 1);
-          const float wx = static_cast<float>(std::clamp(x - x0, 0.0, 1.0));
-          const auto at = [&](int yy, int xx) {
-            return acc[static_cast<std::size_t>(yy) * rw + xx];
-          };
-          const float v = (1 - wy) * ((1 - wx) * at(y0, x0) + wx * at(y0, x1)) +
-                          wy * ((1 - wx) * at(y1, x0) + wx * at(y1, x1));
-          // Each reduced pixel summed f*f full pixels: spread the sum back over f*f pixels.
-          d[static_cast<std::size_t>(r) * width + c] = v / static_cast<float>(f * f);
-        }
-      }
-    }
+    // The three channels (re, im, DC) are independent: one per task on the row pool.
+    pool->Run(
+        3,
+        [&](int ch0, int ch1, int thread) {
+          Scratch& sc = scratch[thread];
+          std::vector<float>& reduced = sc.scatter_tmp[0];
+          std::vector<float>& blurred = sc.scatter_tmp[1];
+          std::vector<float>& work = sc.scatter_tmp[2];
+          std::vector<float>& acc = sc.scatter_tmp[3];
+          for (int ch = ch0; ch < ch1; ++ch) {
+            reduced.assign(static_cast<std::size_t>(rw) * rh, 0.f);
+            for (int r = 0; r < height; ++r) {
+              float* dst_row = &reduced[static_cast<std::size_t>(r / f) * rw];
+              const float* src_row = &(*src[ch])[static_cast<std::size_t>(r) * width];
+              for (int c0 = 0, j = 0; c0 < width; c0 += f, ++j) {
+                float a = 0;
+                for (int c = c0; c < std::min(c0 + f, width); ++c) a += src_row[c];
+                dst_row[j] += a;
+              }
+            }
+            acc.assign(reduced.size(), 0.f);
+            for (std::size_t l = 0; l < sp.weight.size(); ++l) {
+              blurred = reduced;
+              BlurInPlace(blurred, work, rw, rh, sp.kernel[l]);
+              const float wl = sp.weight[l];
+              for (std::size_t i = 0; i < acc.size(); ++i) acc[i] += wl * blurred[i];
+            }
+            // Bilinear upsampling: interpolate along the rows of the reduced image first (each
+            // reduced row once), then between the two rows of every full row.
+            work.resize(static_cast<std::size_t>(rh) * width);
+            for (int j = 0; j < rh; ++j) {
+              const float* a = &acc[static_cast<std::size_t>(j) * rw];
+              float* o = &work[static_cast<std::size_t>(j) * width];
+              for (int c = 0; c < width; ++c) {
+                o[c] = (1 - sp.wx[c]) * a[sp.x0[c]] + sp.wx[c] * a[sp.x1[c]];
+              }
+            }
+            std::vector<float>& d = *dst[ch];
+            for (int r = 0; r < height; ++r) {
+              const float* a = &work[static_cast<std::size_t>(sp.y0[r]) * width];
+              const float* b = &work[static_cast<std::size_t>(sp.y1[r]) * width];
+              const float wy = sp.wy[r];
+              float* o = &d[static_cast<std::size_t>(r) * width];
+              for (int c = 0; c < width; ++c) o[c] = (1 - wy) * a[c] + wy * b[c];
+            }
+          }
+        },
+        1);
   }
 
   // Saturation physics on the noisy tap charges (electrons). A storage site holds at most the
@@ -761,15 +1608,18 @@ std::optional<Frame> SimulatedCamera::Grab() {
   const int slots = split ? 4 : 1;
   im.renders.resize(4);
   im.keys.resize(4);
+  const RenderKey truth_key = im.MakeKey(mid, pan);
   for (int s = 0; s < slots; ++s) {
     const double t = split ? start + (s + 0.5) * t_int_s / 4 : mid;
     const RenderKey key = im.MakeKey(t, pan);
     if (!(key == im.keys[s])) {
-      im.RenderAt(t, pan, im.renders[s]);
+      // One rendering at mid-exposure also casts the ground-truth rays (same time and pose).
+      const bool with_truth = !split && !(truth_key == im.truth_key);
+      im.RenderAt(t, pan, im.renders[s], with_truth);
       im.keys[s] = key;
+      if (with_truth) im.truth_key = truth_key;
     }
   }
-  const RenderKey truth_key = im.MakeKey(mid, pan);
   if (!(truth_key == im.truth_key)) {
     im.PlaceObjects(mid);
     im.TruthAt(mid, pan);
@@ -798,96 +1648,105 @@ std::optional<Frame> SimulatedCamera::Grab() {
   const std::uint64_t frame_seed =
       opt.seed * 0x9E3779B97F4A7C15ull + sequence_ * 0xD1B54A32D192ED03ull;
 
+  // Row loops run on the camera's persistent workers (the demodulation loop below too).
+  const auto ParallelRows = [&im](int rows, int /*threads*/, const auto& body) {
+    im.pool->Run(rows, body);
+  };
   // Taps: noiseless means, then shot and read noise per tap.
   const double cos_bias = std::cos(std::min(bias_rad, kPi));
-  // True when the angle between phasors (ar, ai) and (br, bi) exceeds the truth bias.
+  // True when the angle between phasors (ar, ai) and (br, bi) exceeds the truth bias, i.e.
+  // dot < cos_bias |a| |b|; squared (no square root) where both sides are known to be >= 0.
   auto differ = [cos_bias](double ar, double ai, double br, double bi) {
     const double dot = ar * br + ai * bi;
-    const double norms = std::sqrt((ar * ar + ai * ai) * (br * br + bi * bi));
-    return dot < cos_bias * norms;
+    const double norms2 = (ar * ar + ai * ai) * (br * br + bi * bi);
+    if (cos_bias >= 0) return dot < 0 || dot * dot < cos_bias * cos_bias * norms2;
+    return dot < cos_bias * std::sqrt(norms2);
   };
-  const double wiggle_a = opt.wiggling ? model.wiggle_amplitude_m : 0.0;
-  const double m_to_rad = two_pi / range;
-  ParallelRows(h, opt.threads, [&](int r0, int r1, int /*thread*/) {
+  SensorConstants sk;
+  sk.t_int_s = t_int_s;
+  sk.dark_e = dark;
+  sk.global_offset_m = global_offset_m;
+  sk.wiggle_m = opt.wiggling ? model.wiggle_amplitude_m : 0.0;
+  sk.wiggle_cos = std::cos(model.wiggle_phase_rad);
+  sk.wiggle_sin = std::sin(model.wiggle_phase_rad);
+  sk.m_to_rad = two_pi / range;
+  const double read_var = read_sigma * read_sigma;
+  const double sigma_scale = range / (2 * std::sqrt(2.0) * kPi);
+  ParallelRows(h, opt.threads, [&](int r0, int r1, int thread) {
+    SensorRow& sr = im.scratch[thread].sensor;
+    sr.Resize(w);
     for (int r = r0; r < r1; ++r) {
+      const std::size_t row = static_cast<std::size_t>(r) * w;
+      const float* fpn = &im.fpn_m[row];  // zeros when the fixed pattern is off
+      // Noiseless means of the four taps (each from its own rendering when the scene moves).
+      for (int slot = 0; slot < slots; ++slot) {
+        const Render& rd = im.renders[slot];
+        PixelMeans(sk, w, &rd.re[row], &rd.im[row], &rd.dc[row], &rd.scat_re[row], &rd.scat_im[row],
+                   &rd.scat_dc[row], fpn, sr.a[slot].data(), sr.b[slot].data(),
+                   sr.cos_p[slot].data(), sr.sin_p[slot].data(), sr.shift.data());
+      }
+      TapMeans(w, slots, sr);
+      NoiseScales(w, read_var, sigma_scale, sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(),
+                  sr.mu[3].data(), sr.a_mean.data(), sr.b_mean.data(), sr.sd[0].data(),
+                  sr.sd[1].data(), sr.sd[2].data(), sr.sd[3].data(), sr.sigma.data(),
+                  sr.noise.data());
+      // Shot and read noise, one random stream per row.
       Rng rng(frame_seed ^ (static_cast<std::uint64_t>(r) * 0xA24BAED4963EE407ull));
+      // Draws in the order of Rng::Poisson then the read noise, per tap: drawing shot plus read
+      // noise as one N(mu, mu + s^2) would be the same distribution with half the draws, but a
+      // different realisation, and statistics evaluated on single frames (experiments fig. 6-7)
+      // depend on the realisation.
       for (int c = 0; c < w; ++c) {
-        const std::size_t p = static_cast<std::size_t>(r) * w + c;
-        PixelFlags causes;
-        double a_mean = 0, b_mean = 0;
-        const double pixel_offset_m = global_offset_m + (opt.fixed_pattern ? im.fpn_m[p] : 0.0);
-        double mu[4];
-        for (int slot = 0; slot < slots; ++slot) {
-          const Render& rd = im.renders[slot];
-          const double re = (rd.re[p] + rd.scat_re[p]) * t_int_s;
-          const double imag = (rd.im[p] + rd.scat_im[p]) * t_int_s;
-          const double b = (rd.dc[p] + rd.scat_dc[p]) * t_int_s + dark;
-          const double a = std::sqrt(re * re + imag * imag);
-          double cos_p = 1, sin_p = 0;
-          if (a > 0) {
-            double offset_m = pixel_offset_m;
-            if (wiggle_a != 0) {
-              // The odd harmonics make the error periodic in the measured phase with period L/4.
-              const double phase = std::atan2(imag, re);
-              offset_m += wiggle_a * std::sin(4 * phase + model.wiggle_phase_rad);
-            }
-            const double cr = re / a, ci = imag / a;
-            const double shift = offset_m * m_to_rad;
-            const double cs = std::cos(shift), sn = std::sin(shift);
-            cos_p = cr * cs - ci * sn;
-            sin_p = ci * cs + cr * sn;
-          }
-          // mu_k = B + A cos(phi - k pi / 2): cos, sin, -cos, -sin.
-          const double taps_k[4] = {b + a * cos_p, b + a * sin_p, b - a * cos_p, b - a * sin_p};
-          if (slots == 1) {
-            for (int k = 0; k < 4; ++k) mu[k] = taps_k[k];
-          } else {
-            mu[slot] = taps_k[slot];
-          }
-          a_mean += a / slots;
-          b_mean += b / slots;
-          if (slot == 0) {
-            // Truth causes from the noiseless components.
-            const double ind_re = rd.re[p] - rd.direct_re[p], ind_im = rd.im[p] - rd.direct_im[p];
-            const double ind2 = ind_re * ind_re + ind_im * ind_im;
-            const double dir2 = static_cast<double>(rd.direct_re[p]) * rd.direct_re[p] +
-                                static_cast<double>(rd.direct_im[p]) * rd.direct_im[p];
-            // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct one.
-            if (ind2 > 0 &&
-                (ind2 >= dir2 || differ(rd.re[p], rd.im[p], rd.direct_re[p], rd.direct_im[p]))) {
-              causes.Set(Flag::kMultipath);
-            }
-            if ((rd.scat_re[p] != 0 || rd.scat_im[p] != 0) &&
-                differ(re, imag, rd.re[p], rd.im[p])) {
-              causes.Set(Flag::kScattering);
-            }
-            if (rd.span_m[p] > opt.truth_mixed_span_m) causes.Set(Flag::kMixed);
-          }
-        }
-        if (slots > 1) {
-          const Render& r0d = im.renders[0];
-          for (int k = 1; k < 4; ++k) {
-            if (differ(im.renders[k].re[p], im.renders[k].im[p], r0d.re[p], r0d.im[p])) {
-              causes.Set(Flag::kMotion);
-              break;
-            }
-          }
-        }
         for (int k = 0; k < 4; ++k) {
-          double v = mu[k];
-          if (opt.shot_noise) v = rng.Poisson(v);
+          double v = sr.mu[k][c];
+          if (opt.shot_noise) {
+            // Rng::Poisson with sqrt(mean) precomputed (vectorised) in the Gaussian regime.
+            v = v >= internal::kPoissonGaussMean ? v + sr.sd[k][c] * rng.Normal() : rng.Poisson(v);
+          }
           if (read_sigma > 0) v += read_sigma * rng.Normal();
-          im.taps[k][p] = static_cast<float>(v);
+          im.taps[k][row + c] = static_cast<float>(v);
         }
+      }
+      // Ground truth.
+      const Render& rd = im.renders[0];
+      if (cos_bias >= 0) {
+        TruthCauses(w, cos_bias * cos_bias, t_int_s, opt.truth_mixed_span_m, range, &rd.re[row],
+                    &rd.im[row], &rd.direct_re[row], &rd.direct_im[row], &rd.scat_re[row],
+                    &rd.scat_im[row], &rd.span_m[row], &im.truth_distance[row], sr.causes.data());
+      }
+      for (int c = 0; c < w; ++c) {
+        const std::size_t p = row + c;
+        PixelFlags causes(sr.causes[c]);
         const float td = im.truth_distance[p];
+        if (cos_bias < 0) {
+          // Truth causes from the noiseless components.
+          const double ind_re = rd.re[p] - rd.direct_re[p], ind_im = rd.im[p] - rd.direct_im[p];
+          const double ind2 = ind_re * ind_re + ind_im * ind_im;
+          const double dir2 = static_cast<double>(rd.direct_re[p]) * rd.direct_re[p] +
+                              static_cast<double>(rd.direct_im[p]) * rd.direct_im[p];
+          // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct one.
+          if (ind2 > 0 &&
+              (ind2 >= dir2 || differ(rd.re[p], rd.im[p], rd.direct_re[p], rd.direct_im[p]))) {
+            causes.Set(Flag::kMultipath);
+          }
+          if (rd.scat_re[p] != 0 || rd.scat_im[p] != 0) {
+            const double re = (rd.re[p] + rd.scat_re[p]) * t_int_s;
+            const double imag = (rd.im[p] + rd.scat_im[p]) * t_int_s;
+            if (differ(re, imag, rd.re[p], rd.im[p])) causes.Set(Flag::kScattering);
+          }
+          if (rd.span_m[p] > opt.truth_mixed_span_m) causes.Set(Flag::kMixed);
+          if (!(td < kInf)) causes.Set(Flag::kNoReturn);
+          if (td >= range && td < kInf) causes.Set(Flag::kBeyondUnambiguous);
+        }
+        for (int k = 1; k < slots; ++k) {
+          if (differ(im.renders[k].re[p], im.renders[k].im[p], rd.re[p], rd.im[p])) {
+            causes.Set(Flag::kMotion);
+            break;
+          }
+        }
         truth.radial_distance_m[p] = td;
-        if (!(td < kInf)) causes.Set(Flag::kNoReturn);
-        if (td >= range && td < kInf) causes.Set(Flag::kBeyondUnambiguous);
-        truth.sigma_m[p] =
-            a_mean > 0 ? static_cast<float>(range * std::sqrt(b_mean + read_sigma * read_sigma) /
-                                            (2 * std::sqrt(2.0) * kPi * a_mean))
-                       : 0.f;
-        im.truth_noise_e2[p] = static_cast<float>(b_mean + read_sigma * read_sigma);
+        truth.sigma_m[p] = sr.sigma[c];
+        im.truth_noise_e2[p] = sr.noise[c];
         truth.causes[p] = causes;
       }
     }
