@@ -20,6 +20,7 @@
 
 #include "fast_math.h"
 #include "rng.h"
+#include "saturation.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -1426,31 +1427,11 @@ struct SimulatedCamera::Impl {
     bool any = false;
     bloom_mean.assign(np, 0.f);
     for (std::size_t i = 0; i < np; ++i) {
-      float n[4], excess = 0;
-      for (int k = 0; k < 4; ++k) {
-        n[k] = taps[k][i];
-        if (n[k] > fw) {
-          excess += n[k] - fw;
-          n[k] = fw;
-        }
-      }
-      if (!(excess > 0)) continue;
-      float keep = keep_share * excess;
-      // Water-filling: at most three rounds, since each round fills at least one more site.
-      for (int round = 0; round < 4 && keep > 0; ++round) {
-        int room = 0;
-        for (int k = 0; k < 4; ++k) room += n[k] < fw;
-        if (room == 0) break;
-        const float share = keep / static_cast<float>(room);
-        for (int k = 0; k < 4; ++k) {
-          if (!(n[k] < fw)) continue;
-          const float add = std::min(share, fw - n[k]);
-          n[k] += add;
-          keep -= add;
-        }
-      }
+      float n[4];
+      for (int k = 0; k < 4; ++k) n[k] = taps[k][i];
+      const float out = internal::OverflowPixel(n, fw, keep_share);
       for (int k = 0; k < 4; ++k) taps[k][i] = n[k];
-      const float spill = out_share * ((1 - keep_share) * excess + std::max(keep, 0.f));
+      const float spill = out_share * out;
       if (spill > 0) {
         bloom_mean[i] = spill / 4;  // per tap of the receiving pixel
         any = true;
