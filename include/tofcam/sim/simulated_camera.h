@@ -41,6 +41,13 @@ struct SimulatorOptions {
   bool exposure_offset = true;   ///< Distance shift with integration time.
   bool motion = true;            ///< Taps at their own times when something moves.
   int max_bounces = 2;           ///< Mirror bounces per ray, 0..8.
+  /// One-bounce diffuse inter-reflection (LED -> surface -> surface -> camera, e.g. in concave
+  /// corners): an extra phasor over a longer path, so distances are biased long. Off by default:
+  /// it costs about as much as the primary rendering (docs/simulator.md).
+  bool interreflection = false;
+  /// Cosine-weighted hemisphere samples per evaluated point (every second pixel in x and y; the
+  /// result is smoothed along each surface), 1..256.
+  int interreflection_samples = 4;
 
   /// Render taps separately when anything moves more than this during one exposure, m.
   double motion_threshold_m = 0.01;
