@@ -6,6 +6,7 @@
 #include <string>
 
 #include "../filters/hot_loop.h"
+#include "../pipeline/stage_kernels.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -23,11 +24,12 @@ void CheckSize(int w, int h, int cw, int ch, const char* what) {
   }
 }
 
-void CopyOrNan(const Image<float>& src, std::vector<float>& dst) {
+void CopyOrNan(const Image<float>& src, std::size_t begin, std::size_t end,
+               std::vector<float>& dst) {
   if (src.empty()) {
-    std::fill(dst.begin(), dst.end(), kNan);
+    std::fill(dst.begin() + begin, dst.begin() + end, kNan);
   } else {
-    std::copy(src.data(), src.data() + src.size(), dst.begin());
+    std::copy(src.data() + begin, src.data() + end, dst.begin() + begin);
   }
 }
 
@@ -99,8 +101,9 @@ PointCloud MakePointCloud(const MetricFrame& frame, const RayTable& rays,
   return cloud;
 }
 
-void MakePointCloudInto(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud,
-                        const PointCloudOptions& options) {
+namespace kernels {
+
+void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud) {
   const int w = frame.width(), h = frame.height();
   if (frame.radial_distance_m.empty()) {
     throw Error(ErrorCode::kInvalidArgument, "point cloud: empty distance image");
@@ -118,21 +121,31 @@ void MakePointCloudInto(const MetricFrame& frame, const RayTable& rays, PointClo
                                           std::to_string(rays.x.height()) + ", the frame " +
                                           std::to_string(w) + "x" + std::to_string(h));
   }
-
   cloud.Resize(w, h);  // no-op (no allocation) when the cloud already has this size
-  const std::size_t n = cloud.size();
-  CopyOrNan(frame.amplitude, cloud.amplitude);
-  CopyOrNan(frame.intensity, cloud.intensity);
-  CopyOrNan(frame.delta_l_m, cloud.delta_l_m);
+}
 
+void CloudSpan(const MetricFrame& frame, const RayTable& rays, const PointCloudOptions& options,
+               std::size_t begin, std::size_t end, PointCloud& cloud) {
+  CopyOrNan(frame.amplitude, begin, end, cloud.amplitude);
+  CopyOrNan(frame.intensity, begin, end, cloud.intensity);
+  CopyOrNan(frame.delta_l_m, begin, end, cloud.delta_l_m);
   if (frame.flags.empty()) {
-    std::fill(cloud.flags.begin(), cloud.flags.end(), PixelFlags());
+    std::fill(cloud.flags.begin() + begin, cloud.flags.begin() + end, PixelFlags());
   } else {
-    std::copy(frame.flags.data(), frame.flags.data() + n, cloud.flags.begin());
+    std::copy(frame.flags.data() + begin, frame.flags.data() + end, cloud.flags.begin() + begin);
   }
-  Project(n, frame.radial_distance_m.data(), frame.flags.empty() ? nullptr : frame.flags.data(),
-          options.nan_mask, rays.x.data(), rays.y.data(), rays.z.data(), cloud.x.data(),
-          cloud.y.data(), cloud.z.data());
+  Project(end - begin, frame.radial_distance_m.data() + begin,
+          frame.flags.empty() ? nullptr : frame.flags.data() + begin, options.nan_mask,
+          rays.x.data() + begin, rays.y.data() + begin, rays.z.data() + begin,
+          cloud.x.data() + begin, cloud.y.data() + begin, cloud.z.data() + begin);
+}
+
+}  // namespace kernels
+
+void MakePointCloudInto(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud,
+                        const PointCloudOptions& options) {
+  kernels::PrepareCloud(frame, rays, cloud);
+  kernels::CloudSpan(frame, rays, options, 0, cloud.size(), cloud);
 }
 
 }  // namespace tofcam

@@ -131,6 +131,7 @@ class Pipeline {
   PipelineOptions options_;
   CameraInfo camera_;
   RayTable rays_;
+  std::optional<DenseDistanceCorrection> table_;  // the calibration's, resampled once
   std::unique_ptr<IntegrationTimeController> controller_;
 };
 
