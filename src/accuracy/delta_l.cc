@@ -114,13 +114,11 @@ DeltaLPlan PrepareDeltaL(const MetricFrame& frame, const AccuracyOptions& option
   return plan;
 }
 
-void DeltaLSpan(const DeltaLPlan& plan, const MetricFrame& frame, std::size_t begin,
-                std::size_t end, float* out) {
-  const float* a = frame.amplitude.data() + begin;
+void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* a, const float* i, float* out) {
   if (plan.has_intensity) {
-    DeltaLLoop(end - begin, plan.k, a, frame.intensity.data() + begin, out + begin);
+    DeltaLLoop(n, plan.k, a, i, out);
   } else {
-    DeltaLAmplitudeLoop(end - begin, plan.ka, a, out + begin);
+    DeltaLAmplitudeLoop(n, plan.ka, a, out);
   }
 }
 
@@ -129,7 +127,8 @@ void DeltaLSpan(const DeltaLPlan& plan, const MetricFrame& frame, std::size_t be
 void ComputeDeltaLInto(const MetricFrame& frame, const AccuracyOptions& options,
                        Image<float>& out) {
   const kernels::DeltaLPlan plan = kernels::PrepareDeltaL(frame, options, out);
-  kernels::DeltaLSpan(plan, frame, 0, out.size(), out.data());
+  kernels::DeltaLSpan(plan, out.size(), frame.amplitude.data(),
+                      frame.has_intensity() ? frame.intensity.data() : nullptr, out.data());
 }
 
 DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,

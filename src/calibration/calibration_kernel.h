@@ -32,8 +32,9 @@ struct CalibrationPlan {
                                        const OffsetCalibration& calibration,
                                        const DenseDistanceCorrection* table);
 
-// Applies the plan to pixels [begin, end) of `d` (distances, in place) and `f` (flags).
-void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t end, float* d,
+// Applies the plan to pixels [begin, begin + n): `d` (distances, in place) and `f` (flags) point
+// at the span's first pixel.
+void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t n, float* d,
                    PixelFlags* f);
 
 // The calibration's correction resampled for range L, cached per thread (rebuilt when the knots

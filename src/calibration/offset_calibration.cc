@@ -307,17 +307,15 @@ TOFCAM_HOT_LOOP void Eq1Table(std::size_t n, float range, float bias, const floa
 
 }  // namespace
 
-void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t end, float* d,
+void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t n, float* d,
                    PixelFlags* f) {
-  const std::size_t n = end - begin;
   if (plan.table == nullptr) {
-    Eq1(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f + begin, d + begin);
+    Eq1(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, d);
   } else {
-    Eq1Table(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f + begin, d + begin,
-             plan.table->values_m.data(), plan.table_origin_m, plan.table_inv_step, plan.table_last,
-             plan.table_last_segment);
+    Eq1Table(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, d, plan.table->values_m.data(),
+             plan.table_origin_m, plan.table_inv_step, plan.table_last, plan.table_last_segment);
   }
-  if (plan.pixel_flags != nullptr) kernels::OrFlags(n, f + begin, plan.pixel_flags + begin);
+  if (plan.pixel_flags != nullptr) kernels::OrFlags(n, f, plan.pixel_flags + begin);
 }
 
 const DenseDistanceCorrection* CachedTable(const OffsetCalibration& calibration, double range_m) {

@@ -24,12 +24,12 @@ void CheckSize(int w, int h, int cw, int ch, const char* what) {
   }
 }
 
-void CopyOrNan(const Image<float>& src, std::size_t begin, std::size_t end,
-               std::vector<float>& dst) {
-  if (src.empty()) {
-    std::fill(dst.begin() + begin, dst.begin() + end, kNan);
+// n values from src (nullptr: NaN) into dst[begin, begin + n).
+void CopyOrNan(const float* src, std::size_t begin, std::size_t n, std::vector<float>& dst) {
+  if (src == nullptr) {
+    std::fill(dst.begin() + begin, dst.begin() + begin + n, kNan);
   } else {
-    std::copy(src.data() + begin, src.data() + end, dst.begin() + begin);
+    std::copy(src, src + n, dst.begin() + begin);
   }
 }
 
@@ -124,20 +124,25 @@ void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cl
   cloud.Resize(w, h);  // no-op (no allocation) when the cloud already has this size
 }
 
-void CloudSpan(const MetricFrame& frame, const RayTable& rays, const PointCloudOptions& options,
-               std::size_t begin, std::size_t end, PointCloud& cloud) {
-  CopyOrNan(frame.amplitude, begin, end, cloud.amplitude);
-  CopyOrNan(frame.intensity, begin, end, cloud.intensity);
-  CopyOrNan(frame.delta_l_m, begin, end, cloud.delta_l_m);
-  if (frame.flags.empty()) {
-    std::fill(cloud.flags.begin() + begin, cloud.flags.begin() + end, PixelFlags());
+void ProjectSpan(std::size_t n, const float* d, const PixelFlags* f, std::uint16_t mask,
+                 const float* rx, const float* ry, const float* rz, float* x, float* y, float* z) {
+  Project(n, d, f, mask, rx, ry, rz, x, y, z);
+}
+
+void CloudSpan(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,
+               std::size_t n, const float* d, const PixelFlags* f, const float* a, const float* i,
+               const float* dl, PointCloud& cloud) {
+  CopyOrNan(a, begin, n, cloud.amplitude);
+  CopyOrNan(i, begin, n, cloud.intensity);
+  CopyOrNan(dl, begin, n, cloud.delta_l_m);
+  if (f == nullptr) {
+    std::fill(cloud.flags.begin() + begin, cloud.flags.begin() + begin + n, PixelFlags());
   } else {
-    std::copy(frame.flags.data() + begin, frame.flags.data() + end, cloud.flags.begin() + begin);
+    std::copy(f, f + n, cloud.flags.begin() + begin);
   }
-  Project(end - begin, frame.radial_distance_m.data() + begin,
-          frame.flags.empty() ? nullptr : frame.flags.data() + begin, options.nan_mask,
-          rays.x.data() + begin, rays.y.data() + begin, rays.z.data() + begin,
-          cloud.x.data() + begin, cloud.y.data() + begin, cloud.z.data() + begin);
+  Project(n, d, f, options.nan_mask, rays.x.data() + begin, rays.y.data() + begin,
+          rays.z.data() + begin, cloud.x.data() + begin, cloud.y.data() + begin,
+          cloud.z.data() + begin);
 }
 
 }  // namespace kernels
@@ -145,7 +150,10 @@ void CloudSpan(const MetricFrame& frame, const RayTable& rays, const PointCloudO
 void MakePointCloudInto(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud,
                         const PointCloudOptions& options) {
   kernels::PrepareCloud(frame, rays, cloud);
-  kernels::CloudSpan(frame, rays, options, 0, cloud.size(), cloud);
+  auto data = [](const Image<float>& c) { return c.empty() ? nullptr : c.data(); };
+  kernels::CloudSpan(rays, options, 0, cloud.size(), frame.radial_distance_m.data(),
+                     frame.flags.empty() ? nullptr : frame.flags.data(), data(frame.amplitude),
+                     data(frame.intensity), data(frame.delta_l_m), cloud);
 }
 
 }  // namespace tofcam

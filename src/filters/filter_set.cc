@@ -64,7 +64,9 @@ void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays, const Filt
   const kernels::PixelFilterPlan plan = kernels::PreparePixelFilters(frame, o);
   if (!out.SameSize(frame.radial_distance_m))
     out = Image<PixelFlags>(frame.width(), frame.height());
-  kernels::PixelFiltersSpan(plan, frame, 0, out.size(), out.data());
+  auto data = [](const Image<float>& c) { return c.empty() ? nullptr : c.data(); };
+  kernels::PixelFiltersSpan(plan, out.size(), frame.radial_distance_m.data(), data(frame.amplitude),
+                            data(frame.intensity), data(frame.delta_l_m), out.data());
   fi::NeighbourhoodFiltersInto(frame, rays, o, out);
 }
 

@@ -176,16 +176,14 @@ const float* ZeroFloats(std::size_t n) {
   return zeros.data();
 }
 
-// Pixels [begin, end) of the frame; `f` points at the flags of pixel `begin`.
-void RunFused(const kernels::PixelFilterPlan& l, const MetricFrame& frame, std::size_t begin,
-              std::size_t end, PixelFlags* f) {
+// n pixels; channels at the span's first pixel, nullptr when absent (read as zeros).
+void RunFused(const kernels::PixelFilterPlan& l, std::size_t n, const float* d, const float* a,
+              const float* in, const float* dl, PixelFlags* f) {
   // Missing channels read zeros; the plan makes their filters pass (or they are disabled).
-  const std::size_t n = end - begin;
   const float* zeros = ZeroFloats(n);
-  const float* d = frame.radial_distance_m.data() + begin;
-  const float* a = frame.amplitude.empty() ? zeros : frame.amplitude.data() + begin;
-  const float* in = frame.intensity.empty() ? zeros : frame.intensity.data() + begin;
-  const float* dl = frame.delta_l_m.empty() ? zeros : frame.delta_l_m.data() + begin;
+  a = a != nullptr ? a : zeros;
+  in = in != nullptr ? in : zeros;
+  dl = dl != nullptr ? dl : zeros;
   const bool others = l.range_bit != 0 || l.amplitude_bit != 0;
   if (!others && l.saturation_bit == 0 && l.accuracy_bit != 0) {
     FusedAccuracy(n, l, d, a, in, dl, f);
@@ -235,10 +233,10 @@ PixelFilterPlan PreparePixelFilters(const MetricFrame& frame, const FilterSetOpt
   return l;
 }
 
-void PixelFiltersSpan(const PixelFilterPlan& plan, const MetricFrame& frame, std::size_t begin,
-                      std::size_t end, PixelFlags* raised) {
-  std::fill(raised, raised + (end - begin), PixelFlags());
-  if (plan.any) filters_internal::RunFused(plan, frame, begin, end, raised);
+void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
+                      const float* i, const float* dl, PixelFlags* raised) {
+  std::fill(raised, raised + n, PixelFlags());
+  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, raised);
 }
 
 }  // namespace kernels

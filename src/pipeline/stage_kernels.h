@@ -26,6 +26,12 @@ inline constexpr std::size_t kBlockPixels = 512;
 // dst[i] |= src[i] for i in [0, n); dst and src do not overlap.
 void OrFlags(std::size_t n, PixelFlags* dst, const PixelFlags* src);
 
+// memcpy with non-temporal (streaming) stores where the platform has them (SSE2): the written
+// lines bypass the caches and need no read-for-ownership. For outputs larger than the caches,
+// which would be evicted before anyone reads them again. Call StreamFence() after the last one.
+void StreamCopy(void* dst, const void* src, std::size_t bytes);
+void StreamFence();
+
 // --- Stage 1: metric conversion (src/pipeline/metric_conversion.cc) ---------------------------
 
 struct MetricPlan {
@@ -42,7 +48,10 @@ struct MetricPlan {
 // overwrite). Throws like ConvertToMetricInto.
 [[nodiscard]] MetricPlan PrepareMetric(const Frame& frame, const MetricConversionOptions& options,
                                        MetricFrame& out, bool keep_delta_l = false);
-void ConvertSpan(const MetricPlan& plan, std::size_t begin, std::size_t end, MetricFrame& out);
+// Pixels [begin, begin + n) of the frame into d, a, i (nullptr without intensity) and f, which
+// point at the span's first pixel (the frame's own buffers + begin, or a block scratch).
+void ConvertSpan(const MetricPlan& plan, std::size_t begin, std::size_t n, float* d, float* a,
+                 float* i, PixelFlags* f);
 
 // --- Stage 3: ΔL (src/accuracy/delta_l.cc) ----------------------------------------------------
 
@@ -55,9 +64,8 @@ struct DeltaLPlan {
 // Validates options and frame, sizes `out`. Throws like ComputeDeltaLInto.
 [[nodiscard]] DeltaLPlan PrepareDeltaL(const MetricFrame& frame, const AccuracyOptions& options,
                                        Image<float>& out);
-// ΔL of pixels [begin, end) into out[begin, end).
-void DeltaLSpan(const DeltaLPlan& plan, const MetricFrame& frame, std::size_t begin,
-                std::size_t end, float* out);
+// ΔL of n pixels from amplitude a and intensity i (unused in the amplitude-only form) into out.
+void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* a, const float* i, float* out);
 
 // --- Stage 5: the per-pixel filters (src/filters/pixel_filters.cc) ----------------------------
 
@@ -73,15 +81,24 @@ struct PixelFilterPlan {
 // PixelFiltersSpan's inputs (amplitude, ΔL present when needed); throws like ApplyFilters.
 [[nodiscard]] PixelFilterPlan PreparePixelFilters(const MetricFrame& frame,
                                                   const FilterSetOptions& options);
-// Writes (not ORs) the raised bits of pixels [begin, end) to raised[0, end - begin).
-void PixelFiltersSpan(const PixelFilterPlan& plan, const MetricFrame& frame, std::size_t begin,
-                      std::size_t end, PixelFlags* raised);
+// Writes (not ORs) the raised bits of n pixels to raised. Channels may be nullptr when absent
+// (they read as zeros, which the plan makes pass).
+void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
+                      const float* i, const float* dl, PixelFlags* raised);
 
 // --- Stage 6: the organised point cloud (src/cloud/point_cloud.cc) ----------------------------
 
+// Point = d x ray for n pixels, NaN where a `mask` bit is set (f may be nullptr) or d is not
+// finite; the pointers are at the span's first pixel.
+void ProjectSpan(std::size_t n, const float* d, const PixelFlags* f, std::uint16_t mask,
+                 const float* rx, const float* ry, const float* rz, float* x, float* y, float* z);
+
 // Checks the frame and rays and sizes the cloud; throws like MakePointCloudInto.
 void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud);
-void CloudSpan(const MetricFrame& frame, const RayTable& rays, const PointCloudOptions& options,
-               std::size_t begin, std::size_t end, PointCloud& cloud);
+// Points [begin, begin + n) of the cloud from the span's channels (pointers at the span's first
+// pixel; a, i, dl, f may be nullptr when the frame has none: NaN / clear flags).
+void CloudSpan(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,
+               std::size_t n, const float* d, const PixelFlags* f, const float* a, const float* i,
+               const float* dl, PointCloud& cloud);
 
 }  // namespace tofcam::kernels
