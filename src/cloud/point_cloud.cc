@@ -124,11 +124,6 @@ void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cl
   cloud.Resize(w, h);  // no-op (no allocation) when the cloud already has this size
 }
 
-void ProjectSpan(std::size_t n, const float* d, const PixelFlags* f, std::uint16_t mask,
-                 const float* rx, const float* ry, const float* rz, float* x, float* y, float* z) {
-  Project(n, d, f, mask, rx, ry, rz, x, y, z);
-}
-
 void CloudSpan(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,
                std::size_t n, const float* d, const PixelFlags* f, const float* a, const float* i,
                const float* dl, PointCloud& cloud) {

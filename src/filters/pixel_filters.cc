@@ -239,6 +239,11 @@ void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d
   if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, raised);
 }
 
+void PixelFiltersOrSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
+                        const float* i, const float* dl, PixelFlags* flags) {
+  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, flags);
+}
+
 }  // namespace kernels
 
 namespace {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <vector>
@@ -203,6 +204,7 @@ TOFCAM_HOT_LOOP void FlagDense(std::size_t n, const std::int32_t* __restrict idx
 
 struct Range {
   float lo, hi;
+  std::size_t count = 0;  // usable distances (DistanceRange)
 };
 
 // Usable distances' range (usable: finite, > 0, no reject bit, as in Cells). Written with
@@ -213,26 +215,31 @@ TOFCAM_HOT_LOOP void DistanceRange(std::size_t n, const float* __restrict d,
   using namespace simd;
   constexpr float kInf = std::numeric_limits<float>::infinity();
   F8 lo = kInf - F8{}, hi = -kInf - F8{};
+  I8 count = {};
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
     const F8 x = LoadF8(d + i);
     const I8 usable = (x > 0.0f) & (x < kInf) & ((LoadFlags8(pf + i) & kRejectMask) == 0);
     lo = (usable & (x < lo)) ? x : lo;
     hi = (usable & (x > hi)) ? x : hi;
+    count -= usable;  // masks are -1
   }
   float l = kInf, h = -kInf;
+  std::size_t c = 0;
   for (int j = 0; j < 8; ++j) {
     l = std::min(l, lo[j]);
     h = std::max(h, hi[j]);
+    c += static_cast<std::size_t>(count[j]);
   }
   for (; i < n; ++i) {
     const bool usable = (d[i] > 0.0f) & (d[i] < kInf) & ((pf[i].bits() & kRejectMask) == 0);
     if (usable) {
       l = std::min(l, d[i]);
       h = std::max(h, d[i]);
+      ++c;
     }
   }
-  out = {l, h};
+  out = {l, h, c};
 }
 
 // Range of one ray component (finite by construction of a ray table).
@@ -255,7 +262,7 @@ TOFCAM_HOT_LOOP void RayRange(std::size_t n, const float* __restrict r, Range& o
     l = std::min(l, r[i]);
     h = std::max(h, r[i]);
   }
-  out = {l, h};
+  out = {l, h, 0};
 }
 
 // Cell range of fl(s r) over the rectangle of s and r.
@@ -302,15 +309,78 @@ struct DenseScratch {
   std::vector<std::uint32_t> counts;  // all zero between calls
 };
 
+// The sparse case (most pixels unusable, e.g. after the other filters of the full set): runs of
+// eight pixels are tested at once and skipped when none is usable; the rest count and flag one
+// by one. Returns the number of distinct cells touched, listed in `touched`.
+// True when the eight indices at `idx` are all the dummy (`pair`: the dummy twice, as 64 bits).
+inline bool AllDummy(const std::int32_t* idx, std::uint64_t pair) {
+  std::uint64_t v[4];
+  std::memcpy(v, idx, sizeof v);
+  return ((v[0] ^ pair) | (v[1] ^ pair) | (v[2] ^ pair) | (v[3] ^ pair)) == 0;
+}
+
+std::uint64_t DummyPair(std::int32_t dummy) {
+  const auto u = static_cast<std::uint64_t>(static_cast<std::uint32_t>(dummy));
+  return u | (u << 32);
+}
+
+std::size_t CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
+                        std::uint32_t* __restrict counts, std::int32_t* __restrict touched) {
+  const std::uint64_t pair = DummyPair(dummy);
+  std::size_t m = 0;
+  auto add = [&](std::size_t p) {
+    const std::int32_t c = idx[p];
+    if (c == dummy) return;
+    touched[m] = c;
+    m += counts[c] == 0 ? 1 : 0;
+    ++counts[c];
+  };
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    if (AllDummy(idx + i, pair)) continue;
+    for (std::size_t j = i; j < i + 8; ++j) add(j);
+  }
+  for (; i < n; ++i) add(i);
+  return m;
+}
+
+void FlagSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
+                const std::uint32_t* __restrict counts, std::uint32_t min_points,
+                PixelFlags* __restrict f) {
+  const std::uint64_t pair = DummyPair(dummy);
+  const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kSparseCell);
+  auto flag = [&](std::size_t p) {
+    const std::int32_t c = idx[p];
+    const unsigned sparse =
+        static_cast<unsigned>(c < dummy) & static_cast<unsigned>(counts[c] < min_points);
+    f[p] |= PixelFlags(static_cast<std::uint16_t>(sparse * bit));
+  };
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    if (AllDummy(idx + i, pair)) continue;
+    for (std::size_t j = i; j < i + 8; ++j) flag(j);
+  }
+  for (; i < n; ++i) flag(i);
+}
+
 // Counts in the dense array and flags; `idx` holds each pixel's linear index or `cells` (dummy).
-void CountAndFlag(std::size_t n, std::int32_t cells, std::uint32_t min_points, DenseScratch& d,
-                  PixelFlags* out) {
+// With `usable` below a quarter of the pixels (typically the full filter set, where earlier
+// filters rejected most of the frame) runs of unusable pixels are skipped eight at a time;
+// otherwise every pixel is counted, the unusable ones in dummy cells (vectorised flags).
+void CountAndFlag(std::size_t n, std::size_t usable, std::int32_t cells, std::uint32_t min_points,
+                  DenseScratch& d, PixelFlags* out) {
   d.touched.resize(n + 4);
   if (d.counts.size() < static_cast<std::size_t>(cells) + 4) {
     d.counts.assign(static_cast<std::size_t>(cells) + 4, 0);
   }
-  const std::size_t touched = CountDense(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
-  FlagDense(n, d.idx.data(), cells, d.counts.data(), min_points, out);
+  std::size_t touched = 0;
+  if (4 * usable < n) {
+    touched = CountSparse(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
+    FlagSparse(n, d.idx.data(), cells, d.counts.data(), min_points, out);
+  } else {
+    touched = CountDense(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
+    FlagDense(n, d.idx.data(), cells, d.counts.data(), min_points, out);
+  }
   for (std::size_t k = 0; k < touched; ++k) d.counts[d.touched[k]] = 0;
 }
 
@@ -364,7 +434,7 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
     DirectIndex(n, inv_voxel, box, box.x1 - box.x0 + 1, box.y1 - box.y0 + 1,
                 static_cast<std::int32_t>(cells), d, rays.x.data(), rays.y.data(), rays.z.data(),
                 pf, dense.idx.data());
-    CountAndFlag(n, static_cast<std::int32_t>(cells), min_points, dense, out.data());
+    CountAndFlag(n, dr.count, static_cast<std::int32_t>(cells), min_points, dense, out.data());
     return;
   }
 
@@ -379,7 +449,7 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
     dense.idx.resize(n);
     LinearIndex(n, box, box.x1 - box.x0 + 1, box.y1 - box.y0 + 1, static_cast<std::int32_t>(cells),
                 t.cx.data(), t.cy.data(), t.cz.data(), dense.idx.data());
-    CountAndFlag(n, static_cast<std::int32_t>(cells), min_points, dense, out.data());
+    CountAndFlag(n, dr.count, static_cast<std::int32_t>(cells), min_points, dense, out.data());
     return;
   }
 

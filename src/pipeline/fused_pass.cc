@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
-#include <limits>
 #include <string>
 #include <vector>
 
@@ -69,100 +68,46 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   }
   if (s.cloud != nullptr) kernels::PrepareCloud(m, *s.rays, *out.cloud);
 
-  // Each block is computed in a scratch that stays in L1 and then copied to the frame. Working
-  // on the frame's buffers directly would keep ~20 arrays live per block, and at large sizes
-  // every buffer is a separate mmap at the same offset within its pages: all of them then map
-  // to the same L1 sets, more than its 12 ways, and evict each other between the stages. The
-  // scratch is contiguous (spread over all sets); the copies stream one array at a time.
-  constexpr std::size_t kB = kernels::kBlockPixels;
-  // Arrays of the block, staggered by a few cache lines so that no two start at the same offset
-  // within a 4 KiB page (4K aliasing between the loads and stores of the stage loops).
-  struct Scratch {
-    float d[kB];
-    char pad0[64 * 1];
-    float a[kB];
-    char pad1[64 * 2];
-    float i[kB];
-    char pad2[64 * 3];
-    float dl[kB];
-    char pad3[64 * 4];
-    float x[kB];
-    char pad4[64 * 5];
-    float y[kB];
-    char pad5[64 * 6];
-    float z[kB];
-    char pad6[64 * 7];
-    PixelFlags f[kB];
-    char pad7[64 * 8];
-    PixelFlags raised[kB];
-  };
-  thread_local Scratch b;
+  // The stages run one after the other over chunks of kChunkPixels, directly on the frame's
+  // buffers. Smaller, cache-sized blocks (512 pixels in an L1 scratch with the results copied
+  // out, non-temporal stores beyond 24 MiB; or 2K-64K pixels in place) were measured too, with
+  // bit-identical results, and were slower or no faster on the 2-core Zen 5 test machine: there
+  // each stage's working set stays in the 1 MiB L2 at SR-2 size and in the L3 at VGA and 1 MP,
+  // so the extra passes cost little, while per-block calls and copies (and the DRAM writes of
+  // streaming stores) cost more (docs/benchmarks.md). The chunk bounds the scratch.
+  constexpr std::size_t kChunk = kernels::kChunkPixels;
+  const std::size_t n = m.radial_distance_m.size();
+  thread_local std::vector<PixelFlags> raised_chunk;
   const bool intensity = m.has_intensity();
   const bool accuracy = s.accuracy != nullptr;
-  const std::size_t n = m.radial_distance_m.size();
   float* d = m.radial_distance_m.data();
   float* a = m.amplitude.data();
   float* in = intensity ? m.intensity.data() : nullptr;
   float* dl = accuracy ? m.delta_l_m.data() : nullptr;
   PixelFlags* f = m.flags.data();
-  // Outputs beyond this size cannot stay in the caches until anyone reads them: they are written
-  // with non-temporal stores (no read-for-ownership, no eviction of the inputs). 24 MiB: 3/4 of
-  // a 32 MiB L3, the rule glibc's memcpy uses; the SR-2 frame's outputs (0.9 MB) stay cached.
-  constexpr std::size_t kStreamBytes = std::size_t{24} << 20;
-  constexpr std::size_t kOutputBytesPerPixel = 18 + 4 + 26;  // metric frame, flag copies, cloud
-  const bool stream = n * kOutputBytesPerPixel > kStreamBytes;
-  auto put = [stream](auto* dst, const auto* src, std::size_t len) {
-    if (stream) {
-      kernels::StreamCopy(dst, src, len * sizeof(*src));
-    } else {
-      std::copy(src, src + len, dst);
+  for (std::size_t begin = 0; begin < n; begin += kChunk) {
+    const std::size_t len = std::min(kChunk, n - begin);
+    float* cd = d + begin;
+    float* ca = a + begin;
+    float* ci = intensity ? in + begin : nullptr;
+    float* cdl = accuracy ? dl + begin : nullptr;
+    PixelFlags* cf = f + begin;
+    kernels::ConvertSpan(metric, begin, len, cd, ca, ci, cf);
+    if (s.calibration != nullptr)
+      calibration_internal::CalibrateSpan(calibration, begin, len, cd, cf);
+    if (accuracy) kernels::DeltaLSpan(delta_l, len, ca, ci, cdl);
+    if (out.input_flags != nullptr) std::copy(cf, cf + len, out.input_flags->data() + begin);
+    if (out.filter_flags != nullptr) {
+      PixelFlags* raised = out.filter_flags->data() + begin;
+      kernels::PixelFiltersSpan(filters, len, cd, ca, ci, cdl, raised);
+      if (filters.any) kernels::OrFlags(len, cf, raised);
+    } else if (filters.any) {
+      kernels::PixelFiltersOrSpan(filters, len, cd, ca, ci, cdl, cf);  // straight into the flags
     }
-  };
-  const float kNan = std::numeric_limits<float>::quiet_NaN();
-  for (std::size_t begin = 0; begin < n; begin += kB) {
-    const std::size_t len = std::min(kB, n - begin);
-    kernels::ConvertSpan(metric, begin, len, b.d, b.a, intensity ? b.i : nullptr, b.f);
-    if (s.calibration != nullptr) {
-      calibration_internal::CalibrateSpan(calibration, begin, len, b.d, b.f);
-    }
-    if (accuracy) kernels::DeltaLSpan(delta_l, len, b.a, b.i, b.dl);
-    if (out.input_flags != nullptr) put(out.input_flags->data() + begin, b.f, len);
-    if (filters.any) {
-      kernels::PixelFiltersSpan(filters, len, b.d, b.a, intensity ? b.i : nullptr,
-                                accuracy ? b.dl : nullptr, b.raised);
-      kernels::OrFlags(len, b.f, b.raised);
-    } else {
-      std::fill(b.raised, b.raised + len, PixelFlags());
-    }
-    if (out.filter_flags != nullptr) put(out.filter_flags->data() + begin, b.raised, len);
     if (s.cloud != nullptr) {
-      // As MakePointCloudInto: points from the block, the other fields copied (NaN if absent).
-      PointCloud& c = *out.cloud;
-      kernels::ProjectSpan(len, b.d, b.f, s.cloud->nan_mask, s.rays->x.data() + begin,
-                           s.rays->y.data() + begin, s.rays->z.data() + begin, b.x, b.y, b.z);
-      put(c.x.data() + begin, b.x, len);
-      put(c.y.data() + begin, b.y, len);
-      put(c.z.data() + begin, b.z, len);
-      put(c.amplitude.data() + begin, b.a, len);
-      if (intensity) {
-        put(c.intensity.data() + begin, b.i, len);
-      } else {
-        std::fill(c.intensity.begin() + begin, c.intensity.begin() + begin + len, kNan);
-      }
-      if (accuracy) {
-        put(c.delta_l_m.data() + begin, b.dl, len);
-      } else {
-        std::fill(c.delta_l_m.begin() + begin, c.delta_l_m.begin() + begin + len, kNan);
-      }
-      put(c.flags.data() + begin, b.f, len);
+      kernels::CloudSpan(*s.rays, *s.cloud, begin, len, cd, cf, ca, ci, cdl, *out.cloud);
     }
-    put(d + begin, b.d, len);
-    put(a + begin, b.a, len);
-    if (intensity) put(in + begin, b.i, len);
-    if (accuracy) put(dl + begin, b.dl, len);
-    put(f + begin, b.f, len);
   }
-  if (stream) kernels::StreamFence();
 }
 
 }  // namespace tofcam::pipeline_internal

@@ -52,40 +52,6 @@ TOFCAM_HOT_LOOP void OrFlags(std::size_t n, PixelFlags* __restrict dst,
   for (std::size_t i = 0; i < n; ++i) dst[i] |= src[i];
 }
 
-void StreamCopy(void* dst, const void* src, std::size_t bytes) {
-#if defined(__SSE2__)
-  auto* d = static_cast<char*>(dst);
-  const auto* s = static_cast<const char*>(src);
-  // Head up to 16-byte alignment of the destination, streamed body, tail.
-  const std::size_t head = std::min(bytes, (16 - reinterpret_cast<std::uintptr_t>(d) % 16) % 16);
-  std::memcpy(d, s, head);
-  std::size_t i = head;
-  for (; i + 64 <= bytes; i += 64) {
-    const __m128i v0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + i));
-    const __m128i v1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + i + 16));
-    const __m128i v2 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + i + 32));
-    const __m128i v3 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + i + 48));
-    _mm_stream_si128(reinterpret_cast<__m128i*>(d + i), v0);
-    _mm_stream_si128(reinterpret_cast<__m128i*>(d + i + 16), v1);
-    _mm_stream_si128(reinterpret_cast<__m128i*>(d + i + 32), v2);
-    _mm_stream_si128(reinterpret_cast<__m128i*>(d + i + 48), v3);
-  }
-  for (; i + 16 <= bytes; i += 16) {
-    _mm_stream_si128(reinterpret_cast<__m128i*>(d + i),
-                     _mm_loadu_si128(reinterpret_cast<const __m128i*>(s + i)));
-  }
-  std::memcpy(d + i, s + i, bytes - i);
-#else
-  std::memcpy(dst, src, bytes);
-#endif
-}
-
-void StreamFence() {
-#if defined(__SSE2__)
-  _mm_sfence();
-#endif
-}
-
 MetricPlan PrepareMetric(const Frame& frame, const MetricConversionOptions& options,
                          MetricFrame& out, bool keep_delta_l) {
   options.Validate();

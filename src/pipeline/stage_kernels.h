@@ -1,10 +1,9 @@
 #pragma once
-// The per-pixel loops of stages 1, 3, 5 (per-pixel filters) and 6 over a span of pixels
-// [begin, end), shared by the public whole-image functions and the fused pass of PaperChain and
-// Pipeline (src/pipeline/fused_pass.cc), which runs every stage on one block of pixels before
-// the next block, so each byte crosses the memory bus once. Each stage's "Prepare" does the
-// checks and buffer sizing of its public function, once per frame; its "Span" is the loop.
-// Eq. 1 and the distance table are in src/calibration/calibration_kernel.h. Not installed.
+// The per-pixel loops of stages 1, 3, 5 (per-pixel filters) and 6 over a span of pixels, shared
+// by the public whole-image functions and the pass of PaperChain and Pipeline
+// (src/pipeline/fused_pass.cc). Each stage's "Prepare" does the checks and buffer sizing of its
+// public function, once per frame; its "Span" is the loop. Eq. 1 and the distance table are in
+// src/calibration/calibration_kernel.h. Not installed.
 
 #include <cstddef>
 #include <cstdint>
@@ -18,19 +17,11 @@
 
 namespace tofcam::kernels {
 
-// Pixels per block of the fused pass: every channel of a block (registers, offsets, rays,
-// metric frame, ΔL, cloud: ~70 bytes per pixel) stays in the 32-48 KiB L1 data cache between
-// the stages.
-inline constexpr std::size_t kBlockPixels = 512;
+// Pixels per chunk of the fused pass (src/pipeline/fused_pass.cc explains the size).
+inline constexpr std::size_t kChunkPixels = std::size_t{1} << 20;
 
 // dst[i] |= src[i] for i in [0, n); dst and src do not overlap.
 void OrFlags(std::size_t n, PixelFlags* dst, const PixelFlags* src);
-
-// memcpy with non-temporal (streaming) stores where the platform has them (SSE2): the written
-// lines bypass the caches and need no read-for-ownership. For outputs larger than the caches,
-// which would be evicted before anyone reads them again. Call StreamFence() after the last one.
-void StreamCopy(void* dst, const void* src, std::size_t bytes);
-void StreamFence();
 
 // --- Stage 1: metric conversion (src/pipeline/metric_conversion.cc) ---------------------------
 
@@ -85,13 +76,11 @@ struct PixelFilterPlan {
 // (they read as zeros, which the plan makes pass).
 void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
                       const float* i, const float* dl, PixelFlags* raised);
+// The same, ORed into `flags`.
+void PixelFiltersOrSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
+                        const float* i, const float* dl, PixelFlags* flags);
 
 // --- Stage 6: the organised point cloud (src/cloud/point_cloud.cc) ----------------------------
-
-// Point = d x ray for n pixels, NaN where a `mask` bit is set (f may be nullptr) or d is not
-// finite; the pointers are at the span's first pixel.
-void ProjectSpan(std::size_t n, const float* d, const PixelFlags* f, std::uint16_t mask,
-                 const float* rx, const float* ry, const float* rz, float* x, float* y, float* z);
 
 // Checks the frame and rays and sizes the cloud; throws like MakePointCloudInto.
 void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud);

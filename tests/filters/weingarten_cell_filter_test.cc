@@ -195,6 +195,29 @@ TEST(WeingartenCellFilterTest, LongRunsOfUnusablePixelsAndOneCell) {
   }
 }
 
+TEST(WeingartenCellFilterTest, MostlyRejectedFrameCountsOnlyItsUsablePoints) {
+  // 1000 pixels, 900 already rejected (at their own distances, which must not count): of the
+  // 100 usable, 60 lie in cell z = 10, 3 in z = 20 and 37 in z = 30 (0.1 m cells). With most of
+  // the frame rejected the filter skips the unusable pixels instead of counting them.
+  std::vector<float> d(1000, 2.05f);  // the rejected ones would fill cell z = 20
+  Line l = MakeLine(d);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    if (i % 10 != 0) {
+      l.frame.flags[i] = Flag::kHighDeltaL;
+      continue;
+    }
+    const std::size_t k = i / 10;  // 0..99
+    l.frame.radial_distance_m[i] = k < 60 ? 1.05f : k < 63 ? 2.05f : 3.05f;
+  }
+  WeingartenCellOptions o;
+  o.min_points = 4;
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const bool sparse = i % 10 == 0 && i / 10 >= 60 && i / 10 < 63;
+    EXPECT_EQ(out[i].Has(Flag::kSparseCell), sparse) << i;
+  }
+}
+
 TEST(WeingartenCellFilterTest, ErrorsAreReported) {
   const Line l = MakeLine({1.0f});
   WeingartenCellOptions o;

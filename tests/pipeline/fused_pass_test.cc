@@ -1,6 +1,6 @@
-// The fused per-pixel pass (PaperChain, Pipeline::Process) against the stage functions called
-// one after the other on the whole frame: the expectation is the unfused composition, and the
-// results must agree bit for bit (same loops, run block by block).
+// The per-pixel pass of PaperChain and Pipeline::Process against the stage functions called one
+// after the other on the whole frame: the expectation is that composition, and the results must
+// agree bit for bit (the same loops, run chunk by chunk into reused buffers).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -133,9 +133,9 @@ void ExpectSameCloud(const PointCloud& a, const PointCloud& b) {
 }
 
 TEST(PaperChainTest, EqualsTheStagesCalledOneByOne) {
-  // 1024 x 520: outputs beyond the cache-sized threshold, written with streaming stores.
+  // 1100 x 960 pixels: more than one chunk of the pass (2^20 pixels).
   for (const auto& [w, h] :
-       {std::pair{160, 124}, std::pair{157, 123}, std::pair{700, 3}, std::pair{1024, 520}}) {
+       {std::pair{160, 124}, std::pair{157, 123}, std::pair{700, 3}, std::pair{1100, 960}}) {
     for (const bool table : {false, true}) {
       for (const bool intensity : {true, false}) {
         SCOPED_TRACE(std::to_string(w) + "x" + std::to_string(h) + (table ? " table" : "") +
@@ -222,7 +222,7 @@ PipelineResult ReferenceProcess(const PipelineOptions& o, const RayTable& rays,
 TEST(PipelineFusedTest, ProcessEqualsTheStagesCalledOneByOne) {
   for (const int set : {0, 1, 2, 3}) {  // defaults, all filters, neighbourhood only, large
     SCOPED_TRACE(set);
-    // Set 3: the defaults on a frame large enough for streaming stores, accuracy off.
+    // Set 3: the defaults on a larger frame, accuracy off.
     const CameraInfo info = set == 3 ? Camera(1031, 517) : Camera(157, 123);
     PipelineOptions o;
     o.calibration = Calibration(info, true);

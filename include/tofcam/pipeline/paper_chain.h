@@ -1,15 +1,15 @@
 #pragma once
 /// \file
-/// The paper's per-frame chain for one camera in one call, fused into a single pass over the
-/// pixels: registers -> metric (stage 1) -> eq. 1 with the distance table (stage 2) -> ΔL
-/// (stage 3) -> the ΔL threshold (the paper's filter) -> organised point cloud (stage 6).
+/// The paper's per-frame chain for one camera in one call: registers -> metric (stage 1) ->
+/// eq. 1 with the distance table (stage 2) -> ΔL (stage 3) -> the ΔL threshold (the paper's
+/// filter) -> organised point cloud (stage 6), into reused buffers (no allocation per frame).
 ///
 /// The results are exactly those of calling the stage functions one after the other —
 /// ConvertToMetricInto, ApplyCalibrationInPlace, ComputeDeltaLInto,
-/// MergeFlags(AccuracyThresholdFilter), MakePointCloudInto — but the stages run block by block
-/// (512 pixels, L1-resident), so the frame's bytes cross the memory bus once instead of once per
-/// stage. Pipeline::Process runs the same pass (plus the other filters, the controller and the
-/// statistics). See docs/benchmarks.md.
+/// MergeFlags(AccuracyThresholdFilter), MakePointCloudInto — without their per-call checks,
+/// allocations and the per-thread table cache: the distance table is resampled once at
+/// construction and the threshold ORs straight into the flags. Pipeline::Process runs the same
+/// pass (plus the other filters, the controller and the statistics). See docs/benchmarks.md.
 ///
 ///     PaperChain chain(options, camera.Info());
 ///     MetricFrame frame;
