@@ -616,7 +616,7 @@ void RunBench(const BenchOptions& o) {
   report["min_time_s"] = o.min_time_s;
 
   // Memory bandwidth: a 256 MiB memcpy (read + write counted).
-  {
+  if (!o.peers_only) {
     constexpr std::size_t kBytes = std::size_t{256} << 20;
     std::vector<Workspace> ws(2);
     for (auto& w : ws) {
@@ -722,6 +722,11 @@ void RunBench(const BenchOptions& o) {
       peer_inputs.push_back(MakeInput(w, h, o.frames, reg));
     }
     ExportPeers(peer_inputs, o.export_peers_dir, o.min_time_s, peers);
+    if (o.peers_only) {
+      std::printf("peer clouds and tofcam filter results in %s (exposure: register %d)\n",
+                  o.export_peers_dir.c_str(), reg);
+      return;
+    }
   }
 
   if (o.json_output) {
