@@ -108,8 +108,8 @@ TOFCAM_HOT_LOOP void ColorRow(int w, const ColorLaw& law, const float* __restric
 // Interleaves planar r, g, b bytes into RGB triples (restrict pointers: GCC vectorises the
 // stride-3 store group with byte shuffles in the AVX2 clone).
 TOFCAM_HOT_LOOP void Interleave(int w, const std::uint8_t* __restrict r,
-                                const std::uint8_t* __restrict g,
-                                const std::uint8_t* __restrict b, std::uint8_t* __restrict rgb) {
+                                const std::uint8_t* __restrict g, const std::uint8_t* __restrict b,
+                                std::uint8_t* __restrict rgb) {
   for (int i = 0; i < w; ++i) {
     rgb[3 * i] = r[i];
     rgb[3 * i + 1] = g[i];
