@@ -1,7 +1,7 @@
 #pragma once
 // Eq. 1 and the dense distance-correction table over a span of pixels: the per-pixel loop of
-// ApplyCalibrationInPlace, shared with the Pipeline's fused pass (src/pipeline/pipeline.cc),
-// which calls it block by block. Not installed.
+// ApplyCalibrationInPlace, shared with the pass of PaperChain and Pipeline
+// (src/pipeline/fused_pass.cc). Not installed.
 
 #include <cstddef>
 
