@@ -81,16 +81,22 @@ fuzz: deps
 kill-test: build
 	@scripts/kill_recorder_test.sh $(TOFCAM) .
 
-# Peer comparison (issue 7, not part of CI): Open3D's statistical / radius outlier removal beside
-# tofcam's filters on the same simulated frames, judged against the simulator's ground truth.
+# Peer comparison (issue 7, not part of CI): Open3D's and PCL's statistical / radius outlier
+# removal beside tofcam's filters on the same simulated frames (exposure: the may-incremental
+# controller's settled register), judged against the simulator's ground truth. Installs
+# python3-open3d and libpcl-dev if missing, builds tofcam and the PCL peer
+# (-DTOFCAM_BUILD_PEERS=ON), exports, runs both peers; table in $(PEERS_DIR).txt.
 PEERS_DIR ?= $(BUILD)/bench-peers
 bench-peers: build
-	@/usr/bin/python3 -c "import open3d" 2>/dev/null || \
-	  (apt-get update && apt-get install -y --no-install-recommends python3-open3d)
-	@$(TOFCAM) bench --frames 8 --no-simulator --no-recording --threads 1 \
-	  --export-peers $(PEERS_DIR) > $(PEERS_DIR).txt
+	@(/usr/bin/python3 -c "import open3d" 2>/dev/null && dpkg -s libpcl-dev >/dev/null 2>&1) || \
+	  (apt-get update && apt-get install -y --no-install-recommends python3-open3d libpcl-dev)
+	@cmake -S . -B $(BUILD) -DTOFCAM_BUILD_PEERS=ON >/dev/null
+	@cmake --build $(BUILD) -j $(JOBS) --target tofcam_cli pcl_outlier_removal
+	@mkdir -p $(PEERS_DIR)
+	@$(TOFCAM) bench --frames 8 --threads 1 --peers-only --export-peers $(PEERS_DIR)
+	@$(BUILD)/bench/peers/pcl_outlier_removal $(PEERS_DIR) > $(PEERS_DIR)/pcl.txt
 	@OMP_NUM_THREADS=1 /usr/bin/python3 bench/peers/peer_outlier_removal.py $(PEERS_DIR) \
-	  --json $(PEERS_DIR)/peers.json
+	  --json $(PEERS_DIR)/peers.json | tee $(PEERS_DIR).txt
 
 # The paper's experiments against ground truth (issue 5): CSVs and false-colour PNGs in
 # out/experiments, plots and the generated docs/results.md (committed).

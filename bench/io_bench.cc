@@ -4,10 +4,10 @@
 #include <unistd.h>
 
 #include <filesystem>
-#include <random>
 #include <sstream>
 #include <string>
 
+#include "bench_common.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/io/importers.h"
 #include "tofcam/io/recording.h"
@@ -21,65 +21,63 @@ fs::path TempFile(const char* name) {
   return fs::temp_directory_path() / ("tofcam_io_bench_" + std::to_string(::getpid()) + name);
 }
 
-// An SR-2 sized frame (160 x 124) with noisy registers, so compression sees realistic entropy.
-Frame NoisyFrame() {
-  const CameraInfo cam;
-  Frame f;
-  f.distance = Image<std::uint16_t>(cam.width(), cam.height());
-  f.amplitude = Image<std::uint16_t>(cam.width(), cam.height());
-  f.intensity = Image<std::uint16_t>(cam.width(), cam.height());
-  std::mt19937 rng(1);
-  std::normal_distribution<double> noise(0.0, 40.0);
-  for (std::size_t i = 0; i < f.distance.size(); ++i) {
-    f.distance[i] = static_cast<std::uint16_t>(20000 + i % 160 * 30 + noise(rng));
-    f.amplitude[i] = static_cast<std::uint16_t>(3000 + noise(rng));
-    f.intensity[i] = static_cast<std::uint16_t>(9000 + noise(rng));
-  }
-  f.info.camera_model = cam.model;
-  return f;
-}
-
-// Arguments: compression level, flush after each frame (0/1).
+// Arguments: width, height, compression level, flush after each frame (0/1). Simulated frames
+// (bench_inputs.h) with their ground truth, as `tofcam record` writes them.
 void BM_RecordingAppend(benchmark::State& state) {
+  const bench::SimulatedInput& in = bench::Input(state);
   const fs::path file = TempFile("_append.h5");
   RecordingOptions options;
-  options.compression_level = static_cast<int>(state.range(0));
-  options.flush_each_frame = state.range(1) != 0;
-  Frame frame = NoisyFrame();
+  options.compression_level = static_cast<int>(state.range(2));
+  options.flush_each_frame = state.range(3) != 0;
   {
-    RecordingWriter writer(file, CameraInfo{}, options);
+    RecordingWriter writer(file, in.info, options);
+    std::size_t i = 0;
     for (auto _ : state) {
+      Frame frame = in.frames[i % in.frames.size()];
+      frame.info.sequence = i;
+      frame.info.timestamp_ns = static_cast<std::int64_t>(i) * 33'000'000;
+      ++i;
       writer.Append(frame);
-      ++frame.info.sequence;
-      frame.info.timestamp_ns += 33'000'000;
     }
   }
-  state.SetItemsProcessed(state.iterations());
+  bench::SetPixels(state);
   state.counters["bytes_per_frame"] =
       static_cast<double>(fs::file_size(file)) / static_cast<double>(state.iterations());
   fs::remove(file);
 }
 BENCHMARK(BM_RecordingAppend)
-    ->Args({0, 1})
-    ->Args({4, 1})
-    ->Args({4, 0})
+    ->ArgNames({"w", "h", "deflate", "flush"})
+    ->Args({160, 124, 0, 1})
+    ->Args({160, 124, 4, 1})
+    ->Args({160, 124, 4, 0})
+    ->Args({640, 480, 4, 1})
+    ->Args({640, 480, 0, 0})
+    ->Args({1024, 1024, 4, 1})
+    ->Args({1024, 1024, 0, 0})
     ->Unit(benchmark::kMicrosecond);
 
 void BM_RecordingRead(benchmark::State& state) {
+  const bench::SimulatedInput& in = bench::Input(state);
   const fs::path file = TempFile("_read.h5");
   {
-    RecordingWriter writer(file, CameraInfo{});
-    const Frame frame = NoisyFrame();
-    for (int i = 0; i < 64; ++i) writer.Append(frame);
+    RecordingWriter writer(file, in.info);
+    for (std::size_t i = 0; i < 16; ++i) {
+      Frame frame = in.frames[i % in.frames.size()];
+      frame.info.sequence = i;
+      frame.info.timestamp_ns = static_cast<std::int64_t>(i) * 33'000'000;
+      writer.Append(frame);
+    }
   }
   const RecordingReader reader(file);
   std::size_t i = 0;
-  for (auto _ : state) benchmark::DoNotOptimize(reader.Read(i++ % 64));
-  state.SetItemsProcessed(state.iterations());
+  for (auto _ : state) benchmark::DoNotOptimize(reader.Read(i++ % 16));
+  bench::SetPixels(state);
   fs::remove(file);
 }
-BENCHMARK(BM_RecordingRead)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_RecordingRead)->Apply(bench::Resolutions)->Unit(benchmark::kMicrosecond);
 
+// The importers parse real cameras' file formats: their input is those files (test data), not
+// the simulator.
 void BM_ImportAdiInterleaved(benchmark::State& state) {
   const std::string bytes =
       ReadFile(fs::path(TOFCAM_SOURCE_DIR) / "tests/data/real/adi_adtf3175/frame_mode3.bin");

@@ -38,6 +38,7 @@
 #include "tofcam/io/recording.h"
 #include "tofcam/pan/pan_view.h"
 #include "tofcam/pipeline/metric_conversion.h"
+#include "tofcam/pipeline/paper_chain.h"
 #include "tofcam/pipeline/pipeline.h"
 #include "tofcam/sim/simulated_camera.h"
 
@@ -55,6 +56,7 @@ struct BenchOptions {
   std::string export_peers_dir;  // write clouds + tofcam filter results for bench/peers
   bool skip_simulator = false;
   bool skip_recording = false;
+  bool peers_only = false;  // only the peer export (no stage timings)
 };
 
 // The pavilion with the camera driving back and forth at 0.5 m/s while turning (as sim_bench):
@@ -95,6 +97,9 @@ struct Input {
   RayTable rays;
   OffsetCalibration calibration;
   std::vector<Frame> frames;
+  // The same registers without ground truth: what a real camera delivers, used by the chain and
+  // pipeline rows (a simulated frame's truth would add a 10-byte-per-pixel copy to each result).
+  std::vector<Frame> camera_frames;
   std::vector<MetricFrame> ready;  // converted, calibrated, ΔL filled: input of later stages
   // The same with eq. 1 only: the table above is made up (its cost is real, its values are not
   // the simulator's wiggling), so the peer comparison's ground-truth counts use these frames.
@@ -102,7 +107,7 @@ struct Input {
   [[nodiscard]] std::int64_t pixels() const { return std::int64_t{width} * height; }
 };
 
-Input MakeInput(int width, int height, int frames) {
+Input MakeInput(int width, int height, int frames, int integration_register = 40) {
   Input in;
   in.width = width;
   in.height = height;
@@ -110,7 +115,7 @@ Input MakeInput(int width, int height, int frames) {
   sim::SimulatorOptions so;
   so.seed = 7;
   so.threads = 2;  // generating the inputs is not what is measured
-  so.integration_time_register = 40;
+  so.integration_time_register = integration_register;
   sim::SimulatedCamera cam(MovingPavilion(), ScaledSr2(width, height), so);
   in.info = cam.Info();
   in.rays = MakeRayTable(in.info.intrinsics);
@@ -141,7 +146,10 @@ Input MakeInput(int width, int height, int frames) {
     ComputeDeltaLInto(m, {}, m.delta_l_m);
     ApplyCalibrationInPlace(p, eq1_only);
     ComputeDeltaLInto(p, {}, p.delta_l_m);
+    Frame bare = *f;
+    bare.truth.reset();
     in.frames.push_back(std::move(*f));
+    in.camera_frames.push_back(std::move(bare));
     in.ready.push_back(std::move(m));
     in.peer_ready.push_back(std::move(p));
   }
@@ -152,12 +160,15 @@ Input MakeInput(int width, int height, int frames) {
 struct Workspace {
   const Input* input = nullptr;
   std::vector<Frame> frames;
+  std::vector<Frame> camera_frames;
   std::vector<MetricFrame> ready;
   std::vector<MetricFrame> calibrate;  // calibrated in place, over and over
   std::vector<MetricFrame> pan_frames;
   MetricFrame metric;
   Image<float> delta_l;
+  Image<PixelFlags> raised;  // filter output, reused (ApplyFiltersInto)
   PointCloud cloud;
+  std::optional<PaperChain> paper_chain;
   std::unique_ptr<IntegrationTimeController> controller;
   std::optional<Pipeline> pipeline_default;
   std::optional<Pipeline> pipeline_all_filters;
@@ -191,6 +202,7 @@ FilterSetOptions OnlyFilter(const std::string& name) {
 void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
   ws.input = &in;
   ws.frames = in.frames;
+  ws.camera_frames = in.camera_frames;
   ws.ready = in.ready;
   ws.calibrate = in.ready;
   for (int k = 0; k < 5; ++k) {
@@ -199,6 +211,9 @@ void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
     ws.pan_frames.push_back(std::move(f));
   }
   ws.controller = MakeController({});
+  PaperChainOptions pc;
+  pc.calibration = in.calibration;
+  ws.paper_chain.emplace(pc, in.info);
   PipelineOptions po;
   po.calibration = in.calibration;
   ws.pipeline_default.emplace(po, in.info);
@@ -249,23 +264,20 @@ std::vector<Stage> MakeStages() {
   for (const auto& [label, key] : filters) {
     const FilterSetOptions o = OnlyFilter(key);
     s.push_back({label, filter_bytes.at(key), 1, true, [o](Workspace& ws, std::size_t i) {
-                   const Image<PixelFlags> f =
-                       ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, o);
-                   Sink(ws, f.data());
+                   ApplyFiltersInto(ws.ready[i % ws.ready.size()], ws.input->rays, o, ws.raised);
+                   Sink(ws, ws.raised.data());
                  }});
   }
   s.push_back(
       {"filters: paper default set", 4 + 4 + 4 + 2 + 2, 1, true, [](Workspace& ws, std::size_t i) {
-         const Image<PixelFlags> f =
-             ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, {});
-         Sink(ws, f.data());
+         ApplyFiltersInto(ws.ready[i % ws.ready.size()], ws.input->rays, {}, ws.raised);
+         Sink(ws, ws.raised.data());
        }});
   const FilterSetOptions all = AllFilters();
   s.push_back({"filters: full set (all 7)", 4 + 4 + 4 + 4 + 12 + 2 + 2, 1, true,
                [all](Workspace& ws, std::size_t i) {
-                 const Image<PixelFlags> f =
-                     ApplyFilters(ws.ready[i % ws.ready.size()], ws.input->rays, all);
-                 Sink(ws, f.data());
+                 ApplyFiltersInto(ws.ready[i % ws.ready.size()], ws.input->rays, all, ws.raised);
+                 Sink(ws, ws.raised.data());
                }});
   s.push_back(
       {"point cloud", 4 + 4 + 4 + 4 + 2 + 12 + 24 + 2, 1, true, [](Workspace& ws, std::size_t i) {
@@ -286,26 +298,37 @@ std::vector<Stage> MakeStages() {
          const PanView v = MakePanView(ws.pan_frames, ws.input->rays, {});
          Sink(ws, v.panorama.data());
        }});
-  // The issue-4 target: metric + calibration + ΔL + threshold + point cloud, back to back into
-  // reused buffers. Floor: registers, offsets and rays in; metric frame, ΔL and cloud out.
+  // The issue-4 target: metric + calibration (with the table) + ΔL + threshold + point cloud,
+  // fused into one pass (PaperChain), on frames as a camera delivers them (no ground truth).
+  // Floor: registers, offsets and rays in; metric frame, ΔL and cloud out.
+  constexpr double kChainBytes = 6 + 4 + 12 + 14 + 4 + 26;
+  s.push_back({"PAPER CHAIN (target)", kChainBytes, 1, true, [](Workspace& ws, std::size_t i) {
+                 ws.paper_chain->Process(ws.camera_frames[i % ws.camera_frames.size()], ws.metric,
+                                         ws.cloud);
+                 Sink(ws, ws.cloud.x.data());
+               }});
+  // The same stages called one after the other on whole frames (same results).
   s.push_back(
-      {"PAPER CHAIN (target)", 6 + 4 + 12 + 14 + 4 + 26, 1, true, [](Workspace& ws, std::size_t i) {
+      {"paper chain, stage by stage", kChainBytes, 1, true, [](Workspace& ws, std::size_t i) {
          MetricFrame& m = ws.metric;
-         ConvertToMetricInto(ws.frames[i % ws.frames.size()], {}, m);
+         ConvertToMetricInto(ws.camera_frames[i % ws.camera_frames.size()], {}, m);
          ApplyCalibrationInPlace(m, ws.input->calibration);
          ComputeDeltaLInto(m, {}, m.delta_l_m);
-         MergeFlags(m, AccuracyThresholdFilter(m, {}));
+         static const FilterSetOptions threshold = OnlyFilter("accuracy");
+         ApplyFiltersInto(m, ws.input->rays, threshold, ws.raised);
+         MergeFlags(m, ws.raised);
          MakePointCloudInto(m, ws.input->rays, ws.cloud);
          Sink(ws, ws.cloud.x.data());
        }});
-  s.push_back({"PIPELINE (Pipeline::Process, defaults)", 6 + 4 + 12 + 14 + 4 + 26, 1, true,
+  s.push_back({"PIPELINE (Pipeline::Process, defaults)", kChainBytes, 1, true,
                [](Workspace& ws, std::size_t i) {
-                 ws.pipeline_default->Process(ws.frames[i % ws.frames.size()], ws.result);
+                 ws.pipeline_default->Process(ws.camera_frames[i % ws.camera_frames.size()],
+                                              ws.result);
                  Sink(ws, ws.result.cloud.x.data());
                }});
-  s.push_back({"PIPELINE + all filters", 6 + 4 + 12 + 14 + 4 + 26, 1, true,
-               [](Workspace& ws, std::size_t i) {
-                 ws.pipeline_all_filters->Process(ws.frames[i % ws.frames.size()], ws.result);
+  s.push_back({"PIPELINE + all filters", kChainBytes, 1, true, [](Workspace& ws, std::size_t i) {
+                 ws.pipeline_all_filters->Process(ws.camera_frames[i % ws.camera_frames.size()],
+                                                  ws.result);
                  Sink(ws, ws.result.cloud.x.data());
                }});
   return s;
@@ -429,6 +452,49 @@ bool IsBad(const MetricFrame& m, std::size_t i) {
   return !std::isfinite(truth) || !std::isfinite(d) || std::fabs(d - truth) > 0.05f;
 }
 
+// The register the may-incremental controller settles to on the benchmark scene: the SR-2 model
+// in the pavilion at the moving camera's start pose (held still, so there is something to settle
+// on; the peer frames are the first frames of the drive, near that pose), seed 7, eq.-1
+// calibration, the controller's defaults from c_0 = 40, frame t setting the register of frame
+// t + 1. Settled: the register unchanged for 10 frames (at most `frames` frames). The scaled
+// models keep the SR-2 pixel pitch and optics, so the same register exposes them alike.
+int SettledRegister(int frames, std::vector<int>& trajectory) {
+  sim::SimulatorOptions so;
+  so.seed = 7;
+  so.threads = 2;
+  so.integration_time_register = 40;
+  sim::Scene scene = MovingPavilion();
+  scene.camera.keys.resize(1);
+  sim::SimulatedCamera cam(std::move(scene), ScaledSr2(160, 124), so);
+  PipelineOptions po;
+  po.controller.kind = ControllerKind::kMayIncremental;
+  OffsetCalibration c;
+  c.camera_model = cam.Info().model;
+  c.width = 160;
+  c.height = 124;
+  c.modulation_frequency_hz = cam.Info().modulation_frequency_hz;
+  c.offset_m = cam.FixedPatternOffsetM();
+  po.calibration = c;
+  Pipeline pipeline(po, cam.Info());
+  cam.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
+  PipelineResult result;
+  trajectory.clear();
+  for (int i = 0; i < frames; ++i) {
+    std::optional<Frame> f = cam.Grab();
+    if (!f) throw Error(ErrorCode::kInternal, "simulator returned no frame");
+    trajectory.push_back(f->info.integration_time_register);
+    pipeline.Process(*f, result);
+    cam.SetIntegrationTimeRegister(result.next_integration_register);
+    const std::size_t t = trajectory.size();
+    if (t >= 10 && std::all_of(trajectory.end() - 10, trajectory.end(),
+                               [&](int r) { return r == trajectory.back(); })) {
+      return trajectory.back();
+    }
+  }
+  throw Error(ErrorCode::kInternal, "the may-incremental controller did not settle within " +
+                                        std::to_string(frames) + " frames");
+}
+
 // Writes, for bench/peers/peer_outlier_removal.py, each frame's cloud (every pixel with a
 // distance: float32 x, y, z, bad) and tofcam's filter results on the same points.
 void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& dir,
@@ -442,6 +508,7 @@ void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& 
   json res = json::array();
   const std::pair<const char*, FilterSetOptions> configs[] = {
       {"tofcam accuracy threshold", OnlyFilter("accuracy")},
+      {"tofcam amplitude (< 100)", OnlyFilter("amplitude")},
       {"tofcam jump edge", OnlyFilter("jump_edge")},
       {"tofcam flying pixel", OnlyFilter("flying_pixel")},
       {"tofcam Weingarten cells", OnlyFilter("weingarten")},
@@ -473,7 +540,7 @@ void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& 
     for (const auto& [label, options] : configs) {
       std::int64_t bad = 0, good = 0, bad_removed = 0, good_lost = 0;
       for (const MetricFrame& m : in.peer_ready) {
-        const Image<PixelFlags> flags = ApplyFilters(m, in.rays, options);
+        const Image<PixelFlags> flags = ApplyFilters(m, in.rays, options);  // once, for counts
         for (std::size_t i = 0; i < m.radial_distance_m.size(); ++i) {
           if (!m.flags[i].Valid() || !std::isfinite(m.radial_distance_m[i])) continue;
           const bool removed = !flags[i].Valid();
@@ -493,8 +560,8 @@ void ExportPeers(const std::vector<Input>& inputs, const std::filesystem::path& 
       const double ns = TimePerCall(
           ws, 1,
           [o](Workspace& w, std::size_t i) {
-            const Image<PixelFlags> f = ApplyFilters(w.ready[i % w.ready.size()], w.input->rays, o);
-            Sink(w, f.data());
+            ApplyFiltersInto(w.ready[i % w.ready.size()], w.input->rays, o, w.raised);
+            Sink(w, w.raised.data());
           },
           min_time_s);
       res.push_back({{"method", label},
@@ -549,7 +616,7 @@ void RunBench(const BenchOptions& o) {
   report["min_time_s"] = o.min_time_s;
 
   // Memory bandwidth: a 256 MiB memcpy (read + write counted).
-  {
+  if (!o.peers_only) {
     constexpr std::size_t kBytes = std::size_t{256} << 20;
     std::vector<Workspace> ws(2);
     for (auto& w : ws) {
@@ -565,6 +632,7 @@ void RunBench(const BenchOptions& o) {
   const std::pair<int, int> sizes[] = {{160, 124}, {640, 480}, {1024, 1024}};
   std::vector<Input> inputs;
   for (const auto& [w, h] : sizes) {
+    if (o.peers_only) break;
     progress("simulating " + std::to_string(o.frames) + " frames at " + std::to_string(w) + "x" +
              std::to_string(h));
     inputs.push_back(MakeInput(w, h, o.frames));
@@ -621,7 +689,7 @@ void RunBench(const BenchOptions& o) {
   }
 
   std::vector<SimRow> sim_rows;
-  if (!o.skip_simulator) {
+  if (!o.skip_simulator && !o.peers_only) {
     progress("simulator");
     const double t = std::max(o.min_time_s * 4, 1.0);
     for (int th : thread_counts) {
@@ -640,7 +708,25 @@ void RunBench(const BenchOptions& o) {
     progress("exporting clouds for the peer comparison to " + o.export_peers_dir);
     json peers;
     peers["bad_error_m"] = 0.05;
-    ExportPeers(inputs, o.export_peers_dir, o.min_time_s, peers);
+    // The exposure a running robot would have: the may-incremental controller's settled
+    // register, not the benchmark's fixed (under-exposed) 40.
+    std::vector<int> trajectory;
+    const int reg = SettledRegister(200, trajectory);
+    progress("may-incremental controller settles at register " + std::to_string(reg));
+    peers["integration_register"] = reg;
+    peers["controller"] = "may-incremental";
+    peers["controller_trajectory"] = trajectory;
+    std::vector<Input> peer_inputs;
+    for (const auto& [w, h] : sizes) {
+      if (w * h > 640 * 480) continue;  // peers take seconds per megapixel frame
+      peer_inputs.push_back(MakeInput(w, h, o.frames, reg));
+    }
+    ExportPeers(peer_inputs, o.export_peers_dir, o.min_time_s, peers);
+    if (o.peers_only) {
+      std::printf("peer clouds and tofcam filter results in %s (exposure: register %d)\n",
+                  o.export_peers_dir.c_str(), reg);
+      return;
+    }
   }
 
   if (o.json_output) {
@@ -722,6 +808,8 @@ void SetupBenchCommand(CLI::App& app) {
                   "Also write clouds and tofcam filter results for bench/peers to this folder");
   sub->add_flag("--no-simulator", opts->skip_simulator, "Skip the simulator frames/s");
   sub->add_flag("--no-recording", opts->skip_recording, "Skip the recording write/read");
+  sub->add_flag("--peers-only", opts->peers_only,
+                "With --export-peers: only the peer export (no stage timings, no simulator)");
   sub->callback([opts] { RunBench(*opts); });
 }
 

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "../filters/hot_loop.h"
+#include "../pipeline/stage_kernels.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -68,37 +70,66 @@ Image<float> ComputeDeltaL(const MetricFrame& frame, const AccuracyOptions& opti
   return out;
 }
 
-void ComputeDeltaLInto(const MetricFrame& frame, const AccuracyOptions& options,
-                       Image<float>& out) {
+namespace {
+
+// ΔL = k sqrt(I) / A, computed for every pixel and then selected, so the loop has no branch and
+// vectorises.
+TOFCAM_HOT_LOOP void DeltaLLoop(std::size_t n, float k, const float* __restrict a,
+                                const float* __restrict in, float* __restrict o) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float ai = a[i];
+    const float q = k * std::sqrt(std::max(in[i], 0.0f)) / ai;
+    o[i] = ai > 0.0f ? q : kInf;
+  }
+}
+
+// sqrt(k_I A) / A = sqrt(k_I) / sqrt(A).
+TOFCAM_HOT_LOOP void DeltaLAmplitudeLoop(std::size_t n, float ka, const float* __restrict a,
+                                         float* __restrict o) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float ai = a[i];
+    const float q = ka / std::sqrt(std::max(ai, 0.0f));
+    o[i] = ai > 0.0f ? q : kInf;
+  }
+}
+
+}  // namespace
+
+namespace kernels {
+
+DeltaLPlan PrepareDeltaL(const MetricFrame& frame, const AccuracyOptions& options,
+                         Image<float>& out) {
   options.Validate();
   CheckMetricFrame(frame, "ComputeDeltaL");
   const int w = frame.width();
   const int h = frame.height();
-  const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
   if (!out.SameSize(w, h)) out = Image<float>(w, h);
   // ΔL = k sqrt(I) / A with k = scale L / (2 sqrt(8)).
   const double range_m = UnambiguousRangeM(frame.info.modulation_frequency_hz);
-  const float k = static_cast<float>(options.scale * range_m / (2.0 * std::sqrt(8.0)));
-  const float inf = std::numeric_limits<float>::infinity();
-  const float* a = frame.amplitude.data();
-  float* o = out.data();
-  if (frame.has_intensity()) {
-    const float* in = frame.intensity.data();
-    // Computed for every pixel and then selected, so the loop has no branch and vectorises.
-    for (std::size_t i = 0; i < n; ++i) {
-      const float ai = a[i];
-      const float q = k * std::sqrt(std::max(in[i], 0.0f)) / ai;
-      o[i] = ai > 0.0f ? q : inf;
-    }
+  DeltaLPlan plan;
+  plan.k = static_cast<float>(options.scale * range_m / (2.0 * std::sqrt(8.0)));
+  plan.ka = plan.k * static_cast<float>(std::sqrt(options.intensity_per_amplitude));
+  plan.has_intensity = frame.has_intensity();
+  return plan;
+}
+
+void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* a, const float* i, float* out) {
+  if (plan.has_intensity) {
+    DeltaLLoop(n, plan.k, a, i, out);
   } else {
-    // sqrt(k_I A) / A = sqrt(k_I) / sqrt(A).
-    const float ka = k * static_cast<float>(std::sqrt(options.intensity_per_amplitude));
-    for (std::size_t i = 0; i < n; ++i) {
-      const float ai = a[i];
-      const float q = ka / std::sqrt(std::max(ai, 0.0f));
-      o[i] = ai > 0.0f ? q : inf;
-    }
+    DeltaLAmplitudeLoop(n, plan.ka, a, out);
   }
+}
+
+}  // namespace kernels
+
+void ComputeDeltaLInto(const MetricFrame& frame, const AccuracyOptions& options,
+                       Image<float>& out) {
+  const kernels::DeltaLPlan plan = kernels::PrepareDeltaL(frame, options, out);
+  kernels::DeltaLSpan(plan, out.size(), frame.amplitude.data(),
+                      frame.has_intensity() ? frame.intensity.data() : nullptr, out.data());
 }
 
 DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,

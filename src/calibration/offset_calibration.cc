@@ -7,6 +7,9 @@
 #include <string>
 #include <vector>
 
+#include "../filters/hot_loop.h"
+#include "../pipeline/stage_kernels.h"
+#include "calibration_kernel.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -23,6 +26,31 @@ std::string Num(double v) {
   return buf;
 }
 
+// Catmull-Rom through knots k-1..k+2 (end knots repeated) at t in [0, 1] of segment k.
+double CatmullRom(const std::vector<float>& p, std::size_t k, double t) {
+  const std::size_t n = p.size();
+  const double p0 = p[k == 0 ? 0 : k - 1];
+  const double p1 = p[k];
+  const double p2 = p[k + 1];
+  const double p3 = p[std::min(k + 2, n - 1)];
+  return p1 + 0.5 * t *
+                  ((p2 - p0) +
+                   t * ((2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) + t * (3.0 * (p1 - p2) + p3 - p0)));
+}
+
+// max |g''| over segment k in units of 1/step^2: g''(t) = A2 + 3 A3 t is linear in t, so its
+// extremes are at t = 0 and t = 1.
+double MaxSecondDerivative(const std::vector<float>& p, std::size_t k) {
+  const std::size_t n = p.size();
+  const double p0 = p[k == 0 ? 0 : k - 1];
+  const double p1 = p[k];
+  const double p2 = p[k + 1];
+  const double p3 = p[std::min(k + 2, n - 1)];
+  const double a2 = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3;
+  const double a3 = 3.0 * (p1 - p2) + p3 - p0;
+  return std::max(std::abs(a2), std::abs(a2 + 3.0 * a3));
+}
+
 }  // namespace
 
 double DistanceCorrection::Evaluate(double distance_m) const noexcept {
@@ -34,15 +62,7 @@ double DistanceCorrection::Evaluate(double distance_m) const noexcept {
   const double last = static_cast<double>(n - 1);
   if (x >= last) return correction_m.back();
   const auto k = static_cast<std::size_t>(x);
-  const double t = x - static_cast<double>(k);
-  // Catmull-Rom through knots k-1..k+2, end knots repeated.
-  const double p0 = correction_m[k == 0 ? 0 : k - 1];
-  const double p1 = correction_m[k];
-  const double p2 = correction_m[k + 1];
-  const double p3 = correction_m[std::min(k + 2, n - 1)];
-  return p1 + 0.5 * t *
-                  ((p2 - p0) +
-                   t * ((2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) + t * (3.0 * (p1 - p2) + p3 - p0)));
+  return CatmullRom(correction_m, k, x - static_cast<double>(k));
 }
 
 void DistanceCorrection::Validate() const {
@@ -61,6 +81,67 @@ void DistanceCorrection::Validate() const {
       Bad("distance_correction.correction_m[" + std::to_string(i) + "] is not finite");
     }
   }
+}
+
+DenseDistanceCorrection DenseDistanceCorrection::Resample(const DistanceCorrection& g,
+                                                          double range_m, double max_step_m) {
+  g.Validate();
+  if (!(range_m > 0.0) || !std::isfinite(range_m)) {
+    Bad("dense distance correction: range " + Num(range_m) + " m must be > 0");
+  }
+  if (!(max_step_m > 0.0 && max_step_m <= 1.0)) {
+    Bad("dense distance correction: step " + Num(max_step_m) + " m must be in (0, 1]");
+  }
+  const std::vector<float>& knots = g.correction_m;
+  const std::size_t segments = knots.size() - 1;
+  const double end_m = g.start_m + static_cast<double>(segments) * g.step_m;
+  DenseDistanceCorrection d;
+  const double lo = std::max(0.0, g.start_m);
+  const double hi = std::min(range_m, end_m);
+  if (!(hi > lo)) {
+    // No knot interval overlaps [0, L]: g is one end value there.
+    const float v = g.start_m >= range_m ? knots.front() : knots.back();
+    d.origin_m = 0.0;
+    d.step_m = range_m;
+    d.values_m.assign(2, v);
+    return d;
+  }
+  // k samples per knot interval, so knots are samples and g is one cubic per sample interval.
+  std::size_t k =
+      std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(g.step_m / max_step_m - 1e-9)));
+  std::size_t j_lo = 0, j_hi = 0;
+  for (;;) {
+    const double h = g.step_m / static_cast<double>(k);
+    j_lo = static_cast<std::size_t>(std::floor((lo - g.start_m) / h));
+    j_hi = std::min(static_cast<std::size_t>(std::ceil((hi - g.start_m) / h)), segments * k);
+    if (j_hi - j_lo + 1 <= kMaxSamples || k == 1) break;
+    k = std::max<std::size_t>(1, k * (kMaxSamples - 2) / (j_hi - j_lo + 1));
+  }
+  if (j_hi == j_lo) ++j_hi;  // at least two samples (j_hi <= segments * k still holds)
+  const double h = g.step_m / static_cast<double>(k);
+  d.step_m = h;
+  d.origin_m = g.start_m + static_cast<double>(j_lo) * h;
+  d.values_m.resize(j_hi - j_lo + 1);
+  double max_g2 = 0.0;
+  for (std::size_t j = j_lo; j <= j_hi; ++j) {
+    const std::size_t seg = std::min(j / k, segments - 1);
+    const double t = static_cast<double>(j - seg * k) / static_cast<double>(k);
+    d.values_m[j - j_lo] = static_cast<float>(CatmullRom(knots, seg, t));
+    if (j < j_hi) max_g2 = std::max(max_g2, MaxSecondDerivative(knots, seg));
+  }
+  d.max_interpolation_error_m = h * h / 8.0 * max_g2 / (g.step_m * g.step_m);
+  return d;
+}
+
+float DenseDistanceCorrection::Evaluate(float distance_m) const noexcept {
+  const float inv_step = static_cast<float>(1.0 / step_m);
+  const float last = static_cast<float>(values_m.size() - 1);
+  float x = (distance_m - static_cast<float>(origin_m)) * inv_step;
+  x = x > 0.0f ? x : 0.0f;  // also NaN
+  x = std::min(x, last);
+  const int i = std::min(static_cast<int>(x), static_cast<int>(values_m.size()) - 2);
+  const float t = x - static_cast<float>(i);
+  return values_m[i] + t * (values_m[i + 1] - values_m[i]);
 }
 
 void NoiseCalibration::Validate() const {
@@ -133,7 +214,10 @@ double ExposureShiftM(const OffsetCalibration& calibration, double integration_t
          (integration_time_us - calibration.integration_time_us) * 1e-3;
 }
 
-void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibration) {
+namespace calibration_internal {
+
+CalibrationPlan MakePlan(const MetricFrame& frame, const OffsetCalibration& calibration,
+                         const DenseDistanceCorrection* table) {
   const int w = frame.width();
   const int h = frame.height();
   if (w != calibration.width || h != calibration.height || !calibration.offset_m.SameSize(w, h)) {
@@ -154,7 +238,7 @@ void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibr
   const float range = static_cast<float>(UnambiguousRangeM(f));
   // Exposure offset (format v2): a per-frame scalar folded into the constant of eq. 1,
   // l = (m - o - shift + L) mod L. |shift| <= L/4 keeps m - o - shift + L in [L/4, 11L/4), so
-  // the two conditional subtractions below stay exact.
+  // the two conditional subtractions in the loop stay exact.
   const double shift_m = ExposureShiftM(calibration, frame.info.integration_time_us);
   if (!(std::abs(shift_m) <= 0.25 * range)) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -162,61 +246,117 @@ void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibr
                     " m/ms at " + Num(frame.info.integration_time_us) + " us gives a shift of " +
                     Num(shift_m) + " m, beyond L/4");
   }
-  const float bias = static_cast<float>(UnambiguousRangeM(f) - shift_m);
-  const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
-  float* d = frame.radial_distance_m.data();
-  PixelFlags* flags = frame.flags.data();
-  const float* o = calibration.offset_m.data();
-  // Eq. 1. With m in [0, L) and |o| <= L/2, m - o + L lies in [L/2, 5L/2): at most two
-  // subtractions make the mod exact without a division. Branch-free, so it vectorises; kInvalid
-  // pixels keep their value.
-  for (std::size_t i = 0; i < n; ++i) {
-    float l = d[i] - o[i] + bias;
-    l -= l >= range ? range : 0.0f;
-    l -= l >= range ? range : 0.0f;
-    d[i] = flags[i].Has(Flag::kInvalid) ? d[i] : l;
-  }
-  if (calibration.distance_correction) {
-    const DistanceCorrection& g = *calibration.distance_correction;
-    // Knots padded with the end values on both sides so every Catmull-Rom segment reads four
-    // entries without index clamping; single precision is ample (knots are floats).
-    const std::size_t knots = g.correction_m.size();
-    std::vector<float> p(knots + 3);
-    p[0] = g.correction_m.front();
-    std::copy(g.correction_m.begin(), g.correction_m.end(), p.begin() + 1);
-    p[knots + 1] = p[knots + 2] = g.correction_m.back();
+  CalibrationPlan plan;
+  plan.offset_m = calibration.offset_m.data();
+  plan.pixel_flags = calibration.pixel_flags.empty() ? nullptr : calibration.pixel_flags.data();
+  plan.range_m = range;
+  plan.bias_m = static_cast<float>(UnambiguousRangeM(f) - shift_m);
+  if (calibration.distance_correction && table != nullptr) {
     // Catmull-Rom weights have an absolute sum of at most 1.25, so |g| <= 1.25 max |knot|; the
-    // wrap below needs |g| < L/2.
+    // wrap in the loop needs |g| < L/2 (the table's samples are values of g).
     float largest = 0.0f;
-    for (float v : g.correction_m) largest = std::max(largest, std::abs(v));
+    for (float v : calibration.distance_correction->correction_m) {
+      largest = std::max(largest, std::abs(v));
+    }
     if (!(1.25f * largest < 0.5f * range)) {
       throw Error(ErrorCode::kInvalidArgument, "calibration: distance correction up to " +
                                                    Num(largest) +
                                                    " m is too large for L = " + Num(range) + " m");
     }
-    const float start = static_cast<float>(g.start_m);
-    const float inv_step = static_cast<float>(1.0 / g.step_m);
-    const float last = static_cast<float>(knots - 1);
-    const int last_segment = static_cast<int>(knots) - 2;
-    for (std::size_t i = 0; i < n; ++i) {
-      const float l = d[i];
-      const float x = std::clamp((l - start) * inv_step, 0.0f, last);
-      const int k = std::min(static_cast<int>(x), last_segment);  // int32: SSE2 converts it
-      const float t = x - static_cast<float>(k);
-      const float p0 = p[k], p1 = p[k + 1], p2 = p[k + 2], p3 = p[k + 3];
-      const float corr = p1 + 0.5f * t *
-                                  ((p2 - p0) + t * ((2.0f * p0 - 5.0f * p1 + 4.0f * p2 - p3) +
-                                                    t * (3.0f * (p1 - p2) + p3 - p0)));
-      // |corr| < L/2 (Validate), so l - corr + L is in (L/2, 3L/2): one subtraction wraps it.
-      float v = l - corr + range;
-      v -= v >= range ? range : 0.0f;
-      d[i] = flags[i].Has(Flag::kInvalid) ? l : v;
-    }
+    plan.table = table;
+    plan.table_origin_m = static_cast<float>(table->origin_m);
+    plan.table_inv_step = static_cast<float>(1.0 / table->step_m);
+    plan.table_last = static_cast<float>(table->values_m.size() - 1);
+    plan.table_last_segment = static_cast<int>(table->values_m.size()) - 2;
   }
-  if (!calibration.pixel_flags.empty()) {
-    const PixelFlags* pf = calibration.pixel_flags.data();
-    for (std::size_t i = 0; i < n; ++i) flags[i] |= pf[i];
+  return plan;
+}
+
+namespace {
+
+// Eq. 1. With m in [0, L) and |o| <= L/2, m - o + bias lies in [L/4, 11L/4): at most two
+// subtractions make the mod exact without a division. Branch-free, so it vectorises; kInvalid
+// pixels keep their value.
+TOFCAM_HOT_LOOP void Eq1(std::size_t n, float range, float bias, const float* __restrict o,
+                         const PixelFlags* __restrict f, float* __restrict d) {
+  for (std::size_t i = 0; i < n; ++i) {
+    float l = d[i] - o[i] + bias;
+    l -= l >= range ? range : 0.0f;
+    l -= l >= range ? range : 0.0f;
+    d[i] = f[i].Has(Flag::kInvalid) ? d[i] : l;
   }
+}
+
+// Eq. 1, then l' = (l - g(l) + L) mod L with g interpolated linearly in the dense table: two
+// table reads (a gather in the AVX2 clone) instead of the Catmull-Rom segment search.
+TOFCAM_HOT_LOOP void Eq1Table(std::size_t n, float range, float bias, const float* __restrict o,
+                              const PixelFlags* __restrict f, float* __restrict d,
+                              const float* __restrict table, float origin, float inv_step,
+                              float last, int last_segment) {
+  for (std::size_t i = 0; i < n; ++i) {
+    float l = d[i] - o[i] + bias;
+    l -= l >= range ? range : 0.0f;
+    l -= l >= range ? range : 0.0f;
+    float x = (l - origin) * inv_step;
+    x = x > 0.0f ? x : 0.0f;  // NaN too: the index stays in the table
+    x = std::min(x, last);
+    const int k = std::min(static_cast<int>(x), last_segment);  // int32: SSE2 converts it
+    const float t = x - static_cast<float>(k);
+    const float g0 = table[k];
+    const float corr = g0 + t * (table[k + 1] - g0);
+    // |corr| < L/2 (MakePlan), so l - corr + L is in (L/2, 3L/2): one subtraction wraps it.
+    float v = l - corr + range;
+    v -= v >= range ? range : 0.0f;
+    d[i] = f[i].Has(Flag::kInvalid) ? d[i] : v;
+  }
+}
+
+}  // namespace
+
+void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t n, float* d,
+                   PixelFlags* f) {
+  if (plan.table == nullptr) {
+    Eq1(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, d);
+  } else {
+    Eq1Table(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, d, plan.table->values_m.data(),
+             plan.table_origin_m, plan.table_inv_step, plan.table_last, plan.table_last_segment);
+  }
+  if (plan.pixel_flags != nullptr) kernels::OrFlags(n, f, plan.pixel_flags + begin);
+}
+
+const DenseDistanceCorrection* CachedTable(const OffsetCalibration& calibration, double range_m) {
+  if (!calibration.distance_correction) return nullptr;
+  struct Cache {
+    DistanceCorrection source;
+    double range_m = 0.0;
+    DenseDistanceCorrection table;
+    bool valid = false;
+  };
+  thread_local Cache cache;
+  const DistanceCorrection& g = *calibration.distance_correction;
+  if (!cache.valid || cache.range_m != range_m || cache.source.start_m != g.start_m ||
+      cache.source.step_m != g.step_m || cache.source.correction_m != g.correction_m) {
+    cache.valid = false;
+    cache.table = DenseDistanceCorrection::Resample(g, range_m);
+    cache.source = g;
+    cache.range_m = range_m;
+    cache.valid = true;
+  }
+  return &cache.table;
+}
+
+}  // namespace calibration_internal
+
+void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibration) {
+  namespace ci = calibration_internal;
+  // The size checks come first (MakePlan), so the table is only built for a frame that fits.
+  ci::CalibrationPlan plan = ci::MakePlan(frame, calibration, nullptr);
+  if (calibration.distance_correction) {
+    const double range_m = UnambiguousRangeM(frame.info.modulation_frequency_hz);
+    plan = ci::MakePlan(frame, calibration, ci::CachedTable(calibration, range_m));
+  }
+  ci::CalibrateSpan(plan, 0, frame.radial_distance_m.size(), frame.radial_distance_m.data(),
+                    frame.flags.data());
 }
 
 MetricFrame ApplyCalibration(const MetricFrame& frame, const OffsetCalibration& calibration) {

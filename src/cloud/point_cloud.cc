@@ -6,6 +6,7 @@
 #include <string>
 
 #include "../filters/hot_loop.h"
+#include "../pipeline/stage_kernels.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -23,11 +24,12 @@ void CheckSize(int w, int h, int cw, int ch, const char* what) {
   }
 }
 
-void CopyOrNan(const Image<float>& src, std::vector<float>& dst) {
-  if (src.empty()) {
-    std::fill(dst.begin(), dst.end(), kNan);
+// n values from src (nullptr: NaN) into dst[begin, begin + n).
+void CopyOrNan(const float* src, std::size_t begin, std::size_t n, std::vector<float>& dst) {
+  if (src == nullptr) {
+    std::fill(dst.begin() + begin, dst.begin() + begin + n, kNan);
   } else {
-    std::copy(src.data(), src.data() + src.size(), dst.begin());
+    std::copy(src, src + n, dst.begin() + begin);
   }
 }
 
@@ -99,8 +101,9 @@ PointCloud MakePointCloud(const MetricFrame& frame, const RayTable& rays,
   return cloud;
 }
 
-void MakePointCloudInto(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud,
-                        const PointCloudOptions& options) {
+namespace kernels {
+
+void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud) {
   const int w = frame.width(), h = frame.height();
   if (frame.radial_distance_m.empty()) {
     throw Error(ErrorCode::kInvalidArgument, "point cloud: empty distance image");
@@ -118,21 +121,34 @@ void MakePointCloudInto(const MetricFrame& frame, const RayTable& rays, PointClo
                                           std::to_string(rays.x.height()) + ", the frame " +
                                           std::to_string(w) + "x" + std::to_string(h));
   }
-
   cloud.Resize(w, h);  // no-op (no allocation) when the cloud already has this size
-  const std::size_t n = cloud.size();
-  CopyOrNan(frame.amplitude, cloud.amplitude);
-  CopyOrNan(frame.intensity, cloud.intensity);
-  CopyOrNan(frame.delta_l_m, cloud.delta_l_m);
+}
 
-  if (frame.flags.empty()) {
-    std::fill(cloud.flags.begin(), cloud.flags.end(), PixelFlags());
+void CloudSpan(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,
+               std::size_t n, const float* d, const PixelFlags* f, const float* a, const float* i,
+               const float* dl, PointCloud& cloud) {
+  CopyOrNan(a, begin, n, cloud.amplitude);
+  CopyOrNan(i, begin, n, cloud.intensity);
+  CopyOrNan(dl, begin, n, cloud.delta_l_m);
+  if (f == nullptr) {
+    std::fill(cloud.flags.begin() + begin, cloud.flags.begin() + begin + n, PixelFlags());
   } else {
-    std::copy(frame.flags.data(), frame.flags.data() + n, cloud.flags.begin());
+    std::copy(f, f + n, cloud.flags.begin() + begin);
   }
-  Project(n, frame.radial_distance_m.data(), frame.flags.empty() ? nullptr : frame.flags.data(),
-          options.nan_mask, rays.x.data(), rays.y.data(), rays.z.data(), cloud.x.data(),
-          cloud.y.data(), cloud.z.data());
+  Project(n, d, f, options.nan_mask, rays.x.data() + begin, rays.y.data() + begin,
+          rays.z.data() + begin, cloud.x.data() + begin, cloud.y.data() + begin,
+          cloud.z.data() + begin);
+}
+
+}  // namespace kernels
+
+void MakePointCloudInto(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud,
+                        const PointCloudOptions& options) {
+  kernels::PrepareCloud(frame, rays, cloud);
+  auto data = [](const Image<float>& c) { return c.empty() ? nullptr : c.data(); };
+  kernels::CloudSpan(rays, options, 0, cloud.size(), frame.radial_distance_m.data(),
+                     frame.flags.empty() ? nullptr : frame.flags.data(), data(frame.amplitude),
+                     data(frame.intensity), data(frame.delta_l_m), cloud);
 }
 
 }  // namespace tofcam

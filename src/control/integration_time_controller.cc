@@ -8,7 +8,10 @@
 #include <limits>
 #include <string>
 #include <utility>
+#include <vector>
 
+#include "../filters/hot_loop.h"
+#include "../filters/simd.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -131,23 +134,86 @@ bool CountsForExposure(const MetricFrame& frame, std::size_t i, std::uint16_t ex
           frame.intensity[i] >= clipped_intensity);
 }
 
+namespace {
+
+// Eight explicit accumulator lanes: pixel i of a row adds to lane i mod 8 of the row's chunk, the
+// lanes are summed in a fixed order at the end. The loop vectorises (GCC will not reorder one
+// double accumulator) and the result does not depend on the CPU. For integer-valued channels
+// (every register-converted frame) each lane sum is an exact integer below 2^53, so the mean is
+// the exact one; for other values it differs from a sequential sum by at most n * 2^-53 of the
+// sum of magnitudes (tests/control/integration_time_controller_test.cc).
+constexpr int kLanes = 8;
+struct MeanLanes {
+  double sum[kLanes] = {};
+  std::int64_t count[kLanes] = {};
+};
+
+// A pixel counts when it has no `exclude` bit or its value reaches `clipped` (+inf: never),
+// and its value is finite (|x| <= FLT_MAX, as an integer compare of the bits: false for NaN).
+TOFCAM_HOT_LOOP void MeanRow(std::size_t n, const float* __restrict v,
+                             const PixelFlags* __restrict f, std::uint16_t exclude, float clipped,
+                             MeanLanes& lanes) {
+  using namespace simd;
+  constexpr std::int32_t kMaxBits = 0x7f7fffff;  // FLT_MAX
+  D4 sum_lo = {lanes.sum[0], lanes.sum[1], lanes.sum[2], lanes.sum[3]};
+  D4 sum_hi = {lanes.sum[4], lanes.sum[5], lanes.sum[6], lanes.sum[7]};
+  I8 count = {};
+  std::size_t i = 0;
+  for (; i + kLanes <= n; i += kLanes) {
+    const F8 x = LoadF8(v + i);
+    const I8 ok =
+        (((LoadFlags8(f + i) & exclude) == 0) | (x >= clipped)) & (AbsBits(x) <= kMaxBits);
+    const F8 kept = Select(ok, x);
+    sum_lo += Low(kept);
+    sum_hi += High(kept);
+    count -= ok;  // masks are -1
+  }
+  for (int j = 0; j < kLanes; ++j) {
+    lanes.sum[j] = j < 4 ? sum_lo[j] : sum_hi[j - 4];
+    lanes.count[j] += count[j];
+  }
+  for (int j = 0; i < n; ++i, ++j) {
+    const float x = v[i];
+    const bool ok = (((f[i].bits() & exclude) == 0) | (x >= clipped)) &
+                    (std::abs(x) <= std::numeric_limits<float>::max());
+    lanes.sum[j] += ok ? static_cast<double>(x) : 0.0;
+    lanes.count[j] += ok ? 1 : 0;
+  }
+}
+
+}  // namespace
+
 double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& roi,
                             std::uint16_t exclude_flags, double clipped_intensity) {
   const Image<float>& channel = ControlChannel(frame);
   const Rect r = Clip(roi, channel.width(), channel.height());
-  const bool flags_ok = frame.flags.empty() || frame.flags.SameSize(channel);
-  double sum = 0.0;
-  std::size_t count = 0;
-  for (int row = r.row0; row < r.row1; ++row) {
-    const std::size_t base = static_cast<std::size_t>(row) * channel.width();
-    for (int col = r.col0; col < r.col1; ++col) {
-      const std::size_t i = base + col;
-      if (flags_ok && !CountsForExposure(frame, i, exclude_flags, clipped_intensity)) continue;
-      const float v = channel[i];
-      if (!std::isfinite(v)) continue;
-      sum += v;
-      ++count;
+  // Without (usable) flags every pixel counts; the clipped clause reads the intensity, which is
+  // the control channel whenever there is one.
+  const bool flags_ok = !frame.flags.empty() && frame.flags.SameSize(channel);
+  const std::uint16_t exclude = flags_ok ? exclude_flags : 0;
+  // The smallest float >= the threshold: for a float x, x >= clipped_intensity (in double) holds
+  // exactly when x >= this.
+  float clipped = std::numeric_limits<float>::infinity();
+  if (clipped_intensity > 0.0 && frame.has_intensity()) {
+    clipped = static_cast<float>(clipped_intensity);
+    if (static_cast<double>(clipped) < clipped_intensity) {
+      clipped = std::nextafter(clipped, std::numeric_limits<float>::infinity());
     }
+  }
+  thread_local std::vector<PixelFlags> no_flags;
+  const std::size_t cols = static_cast<std::size_t>(r.col1 - r.col0);
+  if (!flags_ok && no_flags.size() < cols) no_flags.resize(cols);
+  MeanLanes lanes;
+  for (int row = r.row0; row < r.row1; ++row) {
+    const std::size_t base = static_cast<std::size_t>(row) * channel.width() + r.col0;
+    MeanRow(cols, channel.data() + base, flags_ok ? frame.flags.data() + base : no_flags.data(),
+            exclude, clipped, lanes);
+  }
+  double sum = 0.0;
+  std::int64_t count = 0;
+  for (int j = 0; j < kLanes; ++j) {
+    sum += lanes.sum[j];
+    count += lanes.count[j];
   }
   return count == 0 ? std::numeric_limits<double>::quiet_NaN() : sum / static_cast<double>(count);
 }

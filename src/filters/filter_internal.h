@@ -7,6 +7,7 @@
 #include "tofcam/core/frame.h"
 #include "tofcam/core/image.h"
 #include "tofcam/core/pixel_flags.h"
+#include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/flying_pixel_filter.h"
 #include "tofcam/filters/jump_edge_filter.h"
 #include "tofcam/filters/pixel_filters.h"
@@ -32,21 +33,17 @@ void AmplitudeInto(const MetricFrame& frame, const AmplitudeThresholdOptions& o,
 void SaturationInto(const MetricFrame& frame, const SaturationOptions& o, Image<PixelFlags>& out);
 void RangeInto(const MetricFrame& frame, const RangeOptions& o, Image<PixelFlags>& out);
 
-// The four per-pixel filters fused into one pass (one read of each channel, one write of the
-// flags); the disabled ones contribute nothing. Same results as calling them one by one.
-struct PixelFilterSet {
-  const RangeOptions* range = nullptr;  // nullptr = disabled
-  const AmplitudeThresholdOptions* amplitude = nullptr;
-  const SaturationOptions* saturation = nullptr;
-  const AccuracyThresholdOptions* accuracy = nullptr;
-};
-void PixelFiltersInto(const MetricFrame& frame, const PixelFilterSet& set, Image<PixelFlags>& out);
-
 // Neighbourhood filters: `prior` (empty = nothing rejected) says which pixels to ignore.
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                   const JumpEdgeOptions& o, Image<PixelFlags>& out);
 void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
                      const FlyingPixelOptions& o, Image<PixelFlags>& out);
+// The enabled flying-pixel, jump-edge and Weingarten filters of `o`, in ApplyFilters' order,
+// ORing into `raised` (the frame's size); `frame.flags | raised` is what each treats as already
+// rejected. The per-pixel filters of `o` are not run here.
+void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
+                              const FilterSetOptions& o, Image<PixelFlags>& raised);
+
 void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                     const WeingartenCellOptions& o, Image<PixelFlags>& out);
 

@@ -1,5 +1,6 @@
 #include "tofcam/filters/filter_set.h"
 
+#include "../pipeline/stage_kernels.h"
 #include "filter_internal.h"
 
 namespace tofcam {
@@ -29,35 +30,50 @@ void FilterSetOptions::Validate() const {
   if (weingarten_enabled) weingarten.Validate();
 }
 
-Image<PixelFlags> ApplyFilters(const MetricFrame& frame, const RayTable& rays,
-                               const FilterSetOptions& o) {
+namespace filters_internal {
+
+void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
+                              const FilterSetOptions& o, Image<PixelFlags>& raised) {
+  if (!o.flying_pixel_enabled && !o.jump_edge_enabled && !o.weingarten_enabled) return;
+  // One scratch image for the combined flags, refreshed before each neighbourhood filter;
+  // reused per thread (no allocation once the frame size is stable).
+  thread_local Image<PixelFlags> prior;
+  if (!prior.SameSize(raised)) prior = Image<PixelFlags>(raised.width(), raised.height());
+  if (o.flying_pixel_enabled) {
+    Combine(frame, raised, prior);
+    FlyingPixelInto(frame, prior, o.flying_pixel, raised);
+  }
+  if (o.jump_edge_enabled) {
+    Combine(frame, raised, prior);
+    JumpEdgeInto(frame, prior, rays, o.jump_edge, raised);
+  }
+  if (o.weingarten_enabled) {
+    Combine(frame, raised, prior);
+    WeingartenInto(frame, prior, rays, o.weingarten, raised);
+  }
+}
+
+}  // namespace filters_internal
+
+void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays, const FilterSetOptions& o,
+                      Image<PixelFlags>& out) {
   namespace fi = filters_internal;
   o.Validate();
   fi::CheckFrame(frame, "filters");
   if (o.jump_edge_enabled || o.weingarten_enabled) fi::CheckRays(frame, rays, "filters");
-  Image<PixelFlags> raised(frame.width(), frame.height());
-  fi::PixelFilterSet pixel;
-  if (o.range_enabled) pixel.range = &o.range;
-  if (o.amplitude_enabled) pixel.amplitude = &o.amplitude;
-  if (o.saturation_enabled) pixel.saturation = &o.saturation;
-  if (o.accuracy_enabled) pixel.accuracy = &o.accuracy;
-  fi::PixelFiltersInto(frame, pixel, raised);
-  if (!o.flying_pixel_enabled && !o.jump_edge_enabled && !o.weingarten_enabled) return raised;
+  const kernels::PixelFilterPlan plan = kernels::PreparePixelFilters(frame, o);
+  if (!out.SameSize(frame.radial_distance_m))
+    out = Image<PixelFlags>(frame.width(), frame.height());
+  auto data = [](const Image<float>& c) { return c.empty() ? nullptr : c.data(); };
+  kernels::PixelFiltersSpan(plan, out.size(), frame.radial_distance_m.data(), data(frame.amplitude),
+                            data(frame.intensity), data(frame.delta_l_m), out.data());
+  fi::NeighbourhoodFiltersInto(frame, rays, o, out);
+}
 
-  // One scratch image for the combined flags, refreshed before each neighbourhood filter.
-  Image<PixelFlags> prior(frame.width(), frame.height());
-  if (o.flying_pixel_enabled) {
-    Combine(frame, raised, prior);
-    fi::FlyingPixelInto(frame, prior, o.flying_pixel, raised);
-  }
-  if (o.jump_edge_enabled) {
-    Combine(frame, raised, prior);
-    fi::JumpEdgeInto(frame, prior, rays, o.jump_edge, raised);
-  }
-  if (o.weingarten_enabled) {
-    Combine(frame, raised, prior);
-    fi::WeingartenInto(frame, prior, rays, o.weingarten, raised);
-  }
+Image<PixelFlags> ApplyFilters(const MetricFrame& frame, const RayTable& rays,
+                               const FilterSetOptions& o) {
+  Image<PixelFlags> raised;
+  ApplyFiltersInto(frame, rays, o, raised);
   return raised;
 }
 

@@ -1,11 +1,13 @@
 #include "tofcam/filters/pixel_filters.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "../pipeline/stage_kernels.h"
 #include "filter_internal.h"
 #include "tofcam/core/error.h"
 
@@ -126,28 +128,47 @@ void RangeInto(const MetricFrame& frame, const RangeOptions& o, Image<PixelFlags
 
 namespace {
 
-struct FusedLimits {
-  float range_lo, range_hi, min_amplitude, max_intensity, max_amplitude, max_peak, max_delta_l;
-  std::uint16_t range_bit, amplitude_bit, saturation_bit, accuracy_bit;
-};
-
-TOFCAM_HOT_LOOP void FusedLoop(std::size_t n, const FusedLimits& l, const float* __restrict d,
-                               const float* __restrict a, const float* __restrict in,
-                               const float* __restrict dl, PixelFlags* __restrict f) {
+// ORs the enabled filters' bits into f. The filters a set leaves out are compiled out
+// (kRange ... kAccuracy), since the frequent sets (the paper's threshold alone, the pipeline's
+// default threshold + saturation) would otherwise pay for every comparison; their bits would be
+// 0 anyway, so every instance gives the generic one's result.
+template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy>
+[[gnu::always_inline]] inline void FusedBody(std::size_t n, const kernels::PixelFilterPlan& l,
+                                             const float* __restrict d, const float* __restrict a,
+                                             const float* __restrict in, const float* __restrict dl,
+                                             PixelFlags* __restrict f) {
   const float lo = l.range_lo, hi = l.range_hi, min_a = l.min_amplitude;
   const float max_i = l.max_intensity, max_a = l.max_amplitude, max_p = l.max_peak;
   const float max_dl = l.max_delta_l;
   const unsigned rb = l.range_bit, ab = l.amplitude_bit, sb = l.saturation_bit, db = l.accuracy_bit;
   for (std::size_t i = 0; i < n; ++i) {
-    const unsigned range_bad = static_cast<unsigned>(!((d[i] >= lo) & (d[i] <= hi)));
-    const unsigned amp_bad = static_cast<unsigned>(!(a[i] >= min_a));
-    const unsigned sat =
-        static_cast<unsigned>((in[i] >= max_i) | (a[i] >= max_a) | (in[i] + a[i] >= max_p));
-    const unsigned dl_bad = static_cast<unsigned>(!((dl[i] >= 0.0f) & (dl[i] <= max_dl)));
-    const unsigned bits = (range_bad * rb) | (amp_bad * ab) | (sat * sb) | (dl_bad * db);
+    unsigned bits = 0;
+    if constexpr (kRange) {
+      bits |= static_cast<unsigned>(!((d[i] >= lo) & (d[i] <= hi))) * rb;
+    }
+    if constexpr (kAmplitude) bits |= static_cast<unsigned>(!(a[i] >= min_a)) * ab;
+    if constexpr (kSaturation) {
+      bits |=
+          static_cast<unsigned>((in[i] >= max_i) | (a[i] >= max_a) | (in[i] + a[i] >= max_p)) * sb;
+    }
+    if constexpr (kAccuracy) {
+      bits |= static_cast<unsigned>(!((dl[i] >= 0.0f) & (dl[i] <= max_dl))) * db;
+    }
     f[i] |= PixelFlags(static_cast<std::uint16_t>(bits));
   }
 }
+
+#define TOFCAM_FUSED_FILTERS(name, r, a, s, c)                                      \
+  TOFCAM_HOT_LOOP void name(std::size_t n, const kernels::PixelFilterPlan& l,       \
+                            const float* __restrict d, const float* __restrict am,  \
+                            const float* __restrict in, const float* __restrict dl, \
+                            PixelFlags* __restrict f) {                             \
+    FusedBody<r, a, s, c>(n, l, d, am, in, dl, f);                                  \
+  }
+TOFCAM_FUSED_FILTERS(FusedAll, true, true, true, true)
+TOFCAM_FUSED_FILTERS(FusedAccuracy, false, false, false, true)
+TOFCAM_FUSED_FILTERS(FusedSaturationAccuracy, false, false, true, true)
+#undef TOFCAM_FUSED_FILTERS
 
 const float* ZeroFloats(std::size_t n) {
   thread_local std::vector<float> zeros;
@@ -155,44 +176,75 @@ const float* ZeroFloats(std::size_t n) {
   return zeros.data();
 }
 
+// n pixels; channels at the span's first pixel, nullptr when absent (read as zeros).
+void RunFused(const kernels::PixelFilterPlan& l, std::size_t n, const float* d, const float* a,
+              const float* in, const float* dl, PixelFlags* f) {
+  // Missing channels read zeros; the plan makes their filters pass (or they are disabled).
+  const float* zeros = ZeroFloats(n);
+  a = a != nullptr ? a : zeros;
+  in = in != nullptr ? in : zeros;
+  dl = dl != nullptr ? dl : zeros;
+  const bool others = l.range_bit != 0 || l.amplitude_bit != 0;
+  if (!others && l.saturation_bit == 0 && l.accuracy_bit != 0) {
+    FusedAccuracy(n, l, d, a, in, dl, f);
+  } else if (!others && l.saturation_bit != 0 && l.accuracy_bit != 0) {
+    FusedSaturationAccuracy(n, l, d, a, in, dl, f);
+  } else {
+    FusedAll(n, l, d, a, in, dl, f);
+  }
+}
+
 }  // namespace
 
-void PixelFiltersInto(const MetricFrame& frame, const PixelFilterSet& set, Image<PixelFlags>& out) {
-  if (set.range == nullptr && set.amplitude == nullptr && set.saturation == nullptr &&
-      set.accuracy == nullptr) {
-    return;
-  }
-  if ((set.amplitude != nullptr || set.saturation != nullptr) && frame.amplitude.empty()) {
+}  // namespace filters_internal
+
+namespace kernels {
+
+PixelFilterPlan PreparePixelFilters(const MetricFrame& frame, const FilterSetOptions& o) {
+  PixelFilterPlan l;
+  l.any = o.range_enabled || o.amplitude_enabled || o.saturation_enabled || o.accuracy_enabled;
+  if (!l.any) return l;
+  if (o.range_enabled) o.range.Validate();
+  if (o.amplitude_enabled) o.amplitude.Validate();
+  if (o.saturation_enabled) o.saturation.Validate();
+  if (o.accuracy_enabled) o.accuracy.Validate();
+  if ((o.amplitude_enabled || o.saturation_enabled) && frame.amplitude.empty()) {
     throw Error(ErrorCode::kInvalidArgument, "filters: amplitude is empty");
   }
-  if (set.accuracy != nullptr && frame.delta_l_m.empty()) {
+  if (o.accuracy_enabled && frame.delta_l_m.empty()) {
     throw Error(ErrorCode::kInvalidArgument,
                 "accuracy threshold filter: delta_l_m is empty (run the accuracy stage first)");
   }
   constexpr float kInf = std::numeric_limits<float>::infinity();
-  const std::size_t n = out.size();
-  FusedLimits l{};
   // A disabled filter gets limits nothing can fail (NaN-safe: its bit is 0 anyway).
-  l.range_lo = set.range ? static_cast<float>(set.range->min_distance_m) : -kInf;
-  l.range_hi = set.range ? static_cast<float>(set.range->max_distance_m) : kInf;
-  l.range_bit = set.range ? Bit(Flag::kOutOfRange) : 0;
-  l.min_amplitude = set.amplitude ? static_cast<float>(set.amplitude->min_amplitude) : 0.0f;
-  l.amplitude_bit = set.amplitude ? Bit(Flag::kLowAmplitude) : 0;
+  l.range_lo = o.range_enabled ? static_cast<float>(o.range.min_distance_m) : -kInf;
+  l.range_hi = o.range_enabled ? static_cast<float>(o.range.max_distance_m) : kInf;
+  l.range_bit = o.range_enabled ? filters_internal::Bit(Flag::kOutOfRange) : 0;
+  l.min_amplitude = o.amplitude_enabled ? static_cast<float>(o.amplitude.min_amplitude) : 0.0f;
+  l.amplitude_bit = o.amplitude_enabled ? filters_internal::Bit(Flag::kLowAmplitude) : 0;
   const bool has_i = !frame.intensity.empty();
   l.max_intensity =
-      set.saturation && has_i ? static_cast<float>(set.saturation->max_intensity) : kInf;
-  l.max_amplitude = set.saturation ? static_cast<float>(set.saturation->max_amplitude) : kInf;
-  l.max_peak = set.saturation && has_i ? static_cast<float>(set.saturation->max_peak) : kInf;
-  l.saturation_bit = set.saturation ? Bit(Flag::kSaturated) : 0;
-  l.max_delta_l = set.accuracy ? static_cast<float>(set.accuracy->max_delta_l_m) : kInf;
-  l.accuracy_bit = set.accuracy ? Bit(Flag::kHighDeltaL) : 0;
-  FusedLoop(n, l, frame.radial_distance_m.data(),
-            frame.amplitude.empty() ? ZeroFloats(n) : frame.amplitude.data(),
-            has_i ? frame.intensity.data() : ZeroFloats(n),
-            frame.delta_l_m.empty() ? ZeroFloats(n) : frame.delta_l_m.data(), out.data());
+      o.saturation_enabled && has_i ? static_cast<float>(o.saturation.max_intensity) : kInf;
+  l.max_amplitude = o.saturation_enabled ? static_cast<float>(o.saturation.max_amplitude) : kInf;
+  l.max_peak = o.saturation_enabled && has_i ? static_cast<float>(o.saturation.max_peak) : kInf;
+  l.saturation_bit = o.saturation_enabled ? filters_internal::Bit(Flag::kSaturated) : 0;
+  l.max_delta_l = o.accuracy_enabled ? static_cast<float>(o.accuracy.max_delta_l_m) : kInf;
+  l.accuracy_bit = o.accuracy_enabled ? filters_internal::Bit(Flag::kHighDeltaL) : 0;
+  return l;
 }
 
-}  // namespace filters_internal
+void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
+                      const float* i, const float* dl, PixelFlags* raised) {
+  std::fill(raised, raised + n, PixelFlags());
+  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, raised);
+}
+
+void PixelFiltersOrSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
+                        const float* i, const float* dl, PixelFlags* flags) {
+  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, flags);
+}
+
+}  // namespace kernels
 
 namespace {
 

@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <vector>
 
 #include "filter_internal.h"
+#include "simd.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -104,21 +106,357 @@ bool Count(CellTable& t, std::size_t n) {
   return true;
 }
 
+// --- Dense grid over the bounding box of the occupied cells -----------------------------------
+//
+// The usual case: the frame's points span a box of a few hundred thousand cells (SR-2 pavilion,
+// 0.1 m: 53 x 44 x 73), so each point's cell gets a linear index into a flat count array and no
+// hashing or probing is needed. The array is all zeros between calls: the cells a frame touches
+// are listed while counting and zeroed afterwards, so no clearing of the whole box per frame.
+
+struct Box {
+  std::int32_t x0 = 0, y0 = 0, z0 = 0, x1 = -1, y1 = -1, z1 = -1;  // inclusive; empty if x1 < x0
+};
+
+// Bounding box of the usable points' cells (vectorisable min / max reductions).
+TOFCAM_HOT_LOOP void Bounds(std::size_t n, const std::int32_t* __restrict cx,
+                            const std::int32_t* __restrict cy, const std::int32_t* __restrict cz,
+                            Box& box) {
+  constexpr std::int32_t kHi = std::numeric_limits<std::int32_t>::max();
+  std::int32_t x0 = kHi, y0 = kHi, z0 = kHi, x1 = kUnusable, y1 = kUnusable, z1 = kUnusable;
+  for (std::size_t i = 0; i < n; ++i) {
+    // Integer masks instead of selects: GCC keeps a branch for `usable ? x : k` here.
+    const std::int32_t m = -static_cast<std::int32_t>(cx[i] != kUnusable);
+    x0 = std::min(x0, (cx[i] & m) | (kHi & ~m));
+    y0 = std::min(y0, (cy[i] & m) | (kHi & ~m));
+    z0 = std::min(z0, (cz[i] & m) | (kHi & ~m));
+    x1 = std::max(x1, cx[i]);  // kUnusable is the smallest int32
+    y1 = std::max(y1, (cy[i] & m) | (kUnusable & ~m));
+    z1 = std::max(z1, (cz[i] & m) | (kUnusable & ~m));
+  }
+  box = {x0, y0, z0, x1, y1, z1};
+}
+
+// Linear cell index in the box, or `dummy` (one past the box) for unusable points.
+TOFCAM_HOT_LOOP void LinearIndex(std::size_t n, const Box& box, std::int32_t dx, std::int32_t dy,
+                                 std::int32_t dummy, const std::int32_t* __restrict cx,
+                                 const std::int32_t* __restrict cy,
+                                 const std::int32_t* __restrict cz, std::int32_t* __restrict idx) {
+  const std::int32_t x0 = box.x0, y0 = box.y0, z0 = box.z0;
+  for (std::size_t i = 0; i < n; ++i) {
+    // Unusable points (cx = kUnusable, cy = cz = 0) are moved into the box before the
+    // arithmetic, so nothing overflows; their index is replaced by the dummy anyway.
+    const std::int32_t m = -static_cast<std::int32_t>(cx[i] != kUnusable);
+    const std::int32_t x = (cx[i] & m) | (x0 & ~m), y = (cy[i] & m) | (y0 & ~m);
+    const std::int32_t z = (cz[i] & m) | (z0 & ~m);
+    const std::int32_t linear = ((z - z0) * dy + (y - y0)) * dx + (x - x0);
+    idx[i] = (linear & m) | (dummy & ~m);
+  }
+}
+
+// Counts the points per cell. Four interleaved streams (quarters of the image): runs of
+// neighbouring pixels in one cell increment the same counter, a store-to-load chain of several
+// cycles per point; four independent chains overlap. Unusable points count into one of four
+// dummy cells (per stream, so they do not form one long chain either). Returns the number of
+// distinct cells touched, listed in `touched`.
+std::size_t CountDense(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
+                       std::uint32_t* __restrict counts, std::int32_t* __restrict touched) {
+  std::size_t m = 0;
+  auto add = [&](std::size_t p, std::int32_t stream) {
+    std::int32_t c = idx[p];
+    c = c == dummy ? dummy + stream : c;
+    const std::uint32_t before = counts[c];
+    touched[m] = c;
+    m += before == 0 ? 1 : 0;
+    counts[c] = before + 1;
+  };
+  const std::size_t q = n / 4;
+  for (std::size_t i = 0; i < q; ++i) {
+    add(i, 0);
+    add(i + q, 1);
+    add(i + 2 * q, 2);
+    add(i + 3 * q, 3);
+  }
+  for (std::size_t p = 4 * q; p < n; ++p) add(p, 0);
+  return m;
+}
+
+// kSparseCell where the point's cell holds fewer than min_points points (dummy cells: unusable,
+// never flagged).
+TOFCAM_HOT_LOOP void FlagDense(std::size_t n, const std::int32_t* __restrict idx,
+                               std::int32_t dummy, const std::uint32_t* __restrict counts,
+                               std::uint32_t min_points, PixelFlags* __restrict f) {
+  const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kSparseCell);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int32_t c = idx[i];
+    const unsigned sparse =
+        static_cast<unsigned>(c < dummy) & static_cast<unsigned>(counts[c] < min_points);
+    f[i] |= PixelFlags(static_cast<std::uint16_t>(sparse * bit));
+  }
+}
+
+// --- One-pass dense path ----------------------------------------------------------------------
+//
+// The cell box can be bounded before computing any cell: with s = fl(d / voxel) in [s_lo, s_hi]
+// (usable distances) and a ray component r in [r_lo, r_hi], fl(s r) is monotone in each factor
+// (correctly rounded products of non-negative s), so its extremes are at the four corners, and
+// FloorCell is monotone too. The linear index then comes straight from the distance and the
+// rays in one vectorised pass, without storing three cell coordinates per pixel.
+
+struct Range {
+  float lo, hi;
+  std::size_t count = 0;  // usable distances (DistanceRange)
+};
+
+// Usable distances' range (usable: finite, > 0, no reject bit, as in Cells). Written with
+// vector extensions: GCC does not vectorise float min / max reductions by itself (NaN and
+// signed-zero rules); min and max are exact, so the lane order does not matter.
+TOFCAM_HOT_LOOP void DistanceRange(std::size_t n, const float* __restrict d,
+                                   const PixelFlags* __restrict pf, Range& out) {
+  using namespace simd;
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  F8 lo = kInf - F8{}, hi = -kInf - F8{};
+  I8 count = {};
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const F8 x = LoadF8(d + i);
+    const I8 usable = (x > 0.0f) & (x < kInf) & ((LoadFlags8(pf + i) & kRejectMask) == 0);
+    lo = (usable & (x < lo)) ? x : lo;
+    hi = (usable & (x > hi)) ? x : hi;
+    count -= usable;  // masks are -1
+  }
+  float l = kInf, h = -kInf;
+  std::size_t c = 0;
+  for (int j = 0; j < 8; ++j) {
+    l = std::min(l, lo[j]);
+    h = std::max(h, hi[j]);
+    c += static_cast<std::size_t>(count[j]);
+  }
+  for (; i < n; ++i) {
+    const bool usable = (d[i] > 0.0f) & (d[i] < kInf) & ((pf[i].bits() & kRejectMask) == 0);
+    if (usable) {
+      l = std::min(l, d[i]);
+      h = std::max(h, d[i]);
+      ++c;
+    }
+  }
+  out = {l, h, c};
+}
+
+// Range of one ray component (finite by construction of a ray table).
+TOFCAM_HOT_LOOP void RayRange(std::size_t n, const float* __restrict r, Range& out) {
+  using namespace simd;
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  F8 lo = kInf - F8{}, hi = -kInf - F8{};
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const F8 x = LoadF8(r + i);
+    lo = x < lo ? x : lo;
+    hi = x > hi ? x : hi;
+  }
+  float l = kInf, h = -kInf;
+  for (int j = 0; j < 8; ++j) {
+    l = std::min(l, lo[j]);
+    h = std::max(h, hi[j]);
+  }
+  for (; i < n; ++i) {
+    l = std::min(l, r[i]);
+    h = std::max(h, r[i]);
+  }
+  out = {l, h, 0};
+}
+
+// Cell range of fl(s r) over the rectangle of s and r.
+void CellRange(float inv_voxel, Range d, Range r, std::int32_t& lo, std::int32_t& hi) {
+  const float s_lo = d.lo * inv_voxel, s_hi = d.hi * inv_voxel;
+  const std::int32_t c[4] = {FloorCell(s_lo * r.lo), FloorCell(s_lo * r.hi), FloorCell(s_hi * r.lo),
+                             FloorCell(s_hi * r.hi)};
+  lo = std::min(std::min(c[0], c[1]), std::min(c[2], c[3]));
+  hi = std::max(std::max(c[0], c[1]), std::max(c[2], c[3]));
+}
+
+// FloorCell without the clamp, for values known to lie inside (-kMaxCell, kMaxCell), where the
+// clamp does nothing (the box check guarantees it).
+inline std::int32_t FloorInBox(float v) {
+  const std::int32_t i = static_cast<std::int32_t>(v);
+  return i - static_cast<std::int32_t>(static_cast<float>(i) > v);
+}
+
+// Linear index of each usable point's cell in `box` (the same cells as Cells computes), or
+// `dummy` for unusable points. The box lies strictly inside +-kMaxCell.
+TOFCAM_HOT_LOOP void DirectIndex(std::size_t n, float inv_voxel, const Box& box, std::int32_t dx,
+                                 std::int32_t dy, std::int32_t dummy, const float* __restrict d,
+                                 const float* __restrict rx, const float* __restrict ry,
+                                 const float* __restrict rz, const PixelFlags* __restrict pf,
+                                 std::int32_t* __restrict idx) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  const std::int32_t x0 = box.x0, y0 = box.y0, z0 = box.z0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool usable = (d[i] > 0.0f) & (d[i] < kInf) & ((pf[i].bits() & kRejectMask) == 0);
+    const float s = usable ? d[i] * inv_voxel : 0.0f;
+    const std::int32_t m = -static_cast<std::int32_t>(usable);
+    // Unusable points are moved to the box corner first, so nothing overflows.
+    const std::int32_t x = (FloorInBox(s * rx[i]) & m) | (x0 & ~m);
+    const std::int32_t y = (FloorInBox(s * ry[i]) & m) | (y0 & ~m);
+    const std::int32_t z = (FloorInBox(s * rz[i]) & m) | (z0 & ~m);
+    const std::int32_t linear = ((z - z0) * dy + (y - y0)) * dx + (x - x0);
+    idx[i] = (linear & m) | (dummy & ~m);
+  }
+}
+
+struct DenseScratch {
+  std::vector<std::int32_t> idx;
+  std::vector<std::int32_t> touched;
+  std::vector<std::uint32_t> counts;  // all zero between calls
+};
+
+// The sparse case (most pixels unusable, e.g. after the other filters of the full set): runs of
+// eight pixels are tested at once and skipped when none is usable; the rest count and flag one
+// by one. Returns the number of distinct cells touched, listed in `touched`.
+// True when the eight indices at `idx` are all the dummy (`pair`: the dummy twice, as 64 bits).
+inline bool AllDummy(const std::int32_t* idx, std::uint64_t pair) {
+  std::uint64_t v[4];
+  std::memcpy(v, idx, sizeof v);
+  return ((v[0] ^ pair) | (v[1] ^ pair) | (v[2] ^ pair) | (v[3] ^ pair)) == 0;
+}
+
+std::uint64_t DummyPair(std::int32_t dummy) {
+  const auto u = static_cast<std::uint64_t>(static_cast<std::uint32_t>(dummy));
+  return u | (u << 32);
+}
+
+std::size_t CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
+                        std::uint32_t* __restrict counts, std::int32_t* __restrict touched) {
+  const std::uint64_t pair = DummyPair(dummy);
+  std::size_t m = 0;
+  auto add = [&](std::size_t p) {
+    const std::int32_t c = idx[p];
+    if (c == dummy) return;
+    touched[m] = c;
+    m += counts[c] == 0 ? 1 : 0;
+    ++counts[c];
+  };
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    if (AllDummy(idx + i, pair)) continue;
+    for (std::size_t j = i; j < i + 8; ++j) add(j);
+  }
+  for (; i < n; ++i) add(i);
+  return m;
+}
+
+void FlagSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
+                const std::uint32_t* __restrict counts, std::uint32_t min_points,
+                PixelFlags* __restrict f) {
+  const std::uint64_t pair = DummyPair(dummy);
+  const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kSparseCell);
+  auto flag = [&](std::size_t p) {
+    const std::int32_t c = idx[p];
+    const unsigned sparse =
+        static_cast<unsigned>(c < dummy) & static_cast<unsigned>(counts[c] < min_points);
+    f[p] |= PixelFlags(static_cast<std::uint16_t>(sparse * bit));
+  };
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    if (AllDummy(idx + i, pair)) continue;
+    for (std::size_t j = i; j < i + 8; ++j) flag(j);
+  }
+  for (; i < n; ++i) flag(i);
+}
+
+// Counts in the dense array and flags; `idx` holds each pixel's linear index or `cells` (dummy).
+// With `usable` below a quarter of the pixels (typically the full filter set, where earlier
+// filters rejected most of the frame) runs of unusable pixels are skipped eight at a time;
+// otherwise every pixel is counted, the unusable ones in dummy cells (vectorised flags).
+void CountAndFlag(std::size_t n, std::size_t usable, std::int32_t cells, std::uint32_t min_points,
+                  DenseScratch& d, PixelFlags* out) {
+  d.touched.resize(n + 4);
+  if (d.counts.size() < static_cast<std::size_t>(cells) + 4) {
+    d.counts.assign(static_cast<std::size_t>(cells) + 4, 0);
+  }
+  std::size_t touched = 0;
+  if (4 * usable < n) {
+    touched = CountSparse(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
+    FlagSparse(n, d.idx.data(), cells, d.counts.data(), min_points, out);
+  } else {
+    touched = CountDense(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
+    FlagDense(n, d.idx.data(), cells, d.counts.data(), min_points, out);
+  }
+  for (std::size_t k = 0; k < touched; ++k) d.counts[d.touched[k]] = 0;
+}
+
+// Largest box (cells) the dense path allocates for n points.
+std::int64_t DenseLimit(std::size_t n) {
+  return std::max<std::int64_t>(std::int64_t{1} << 20, 4 * static_cast<std::int64_t>(n));
+}
+
+bool BoxFits(const Box& box, std::int64_t limit, std::int64_t& cells) {
+  const std::int64_t dx = std::int64_t{box.x1} - box.x0 + 1;
+  const std::int64_t dy = std::int64_t{box.y1} - box.y0 + 1;
+  const std::int64_t dz = std::int64_t{box.z1} - box.z0 + 1;
+  if (!(dx <= limit && dy <= limit && dz <= limit && dx * dy <= limit && dx * dy * dz <= limit)) {
+    return false;
+  }
+  cells = dx * dy * dz;
+  return true;
+}
+
 }  // namespace
 
 void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                     const WeingartenCellOptions& o, Image<PixelFlags>& out) {
   const int w = frame.width(), h = frame.height();
   const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
-  thread_local CellTable t;
-  for (auto* v : {&t.cx, &t.cy, &t.cz, &t.slot_of_pixel}) v->resize(n);
-  Cells(n, static_cast<float>(1.0 / o.voxel_size_m), frame.radial_distance_m.data(), rays.x.data(),
-        rays.y.data(), rays.z.data(), PriorOrZeros(prior, n), t.cx.data(), t.cy.data(),
-        t.cz.data());
+  const float inv_voxel = static_cast<float>(1.0 / o.voxel_size_m);
+  const std::uint32_t min_points = static_cast<std::uint32_t>(o.min_points);
+  const float* d = frame.radial_distance_m.data();
+  const PixelFlags* pf = PriorOrZeros(prior, n);
+  const std::int64_t limit = DenseLimit(n);
+  thread_local DenseScratch dense;
 
-  // The table keeps the size the last frames needed (small tables stay in L1: distinct cells are
-  // far fewer than points), doubles whenever it passes half load, and never needs more than 2n
-  // slots.
+  // The box from the distance range and the ray bounds (no per-pixel cells stored).
+  Range dr{};
+  DistanceRange(n, d, pf, dr);
+  if (!(dr.lo <= dr.hi)) return;  // no usable point
+  Range rx{}, ry{}, rz{};
+  RayRange(n, rays.x.data(), rx);
+  RayRange(n, rays.y.data(), ry);
+  RayRange(n, rays.z.data(), rz);
+  Box box;
+  CellRange(inv_voxel, dr, rx, box.x0, box.x1);
+  CellRange(inv_voxel, dr, ry, box.y0, box.y1);
+  CellRange(inv_voxel, dr, rz, box.z0, box.z1);
+  std::int64_t cells = 0;
+  constexpr std::int32_t kInside = (1 << 20) - 2;  // |cell| below kMaxCell: FloorCell's clamp idle
+  const bool inside = box.x0 >= -kInside && box.y0 >= -kInside && box.z0 >= -kInside &&
+                      box.x1 <= kInside && box.y1 <= kInside && box.z1 <= kInside;
+  if (inside && BoxFits(box, limit, cells)) {
+    dense.idx.resize(n);
+    DirectIndex(n, inv_voxel, box, box.x1 - box.x0 + 1, box.y1 - box.y0 + 1,
+                static_cast<std::int32_t>(cells), d, rays.x.data(), rays.y.data(), rays.z.data(),
+                pf, dense.idx.data());
+    CountAndFlag(n, dr.count, static_cast<std::int32_t>(cells), min_points, dense, out.data());
+    return;
+  }
+
+  // The bound was too loose (or the points really are spread out): cells per pixel, the exact
+  // box of the occupied cells, and the dense array if that box is small enough.
+  thread_local CellTable t;
+  for (auto* v : {&t.cx, &t.cy, &t.cz}) v->resize(n);
+  Cells(n, inv_voxel, d, rays.x.data(), rays.y.data(), rays.z.data(), pf, t.cx.data(), t.cy.data(),
+        t.cz.data());
+  Bounds(n, t.cx.data(), t.cy.data(), t.cz.data(), box);
+  if (BoxFits(box, limit, cells)) {
+    dense.idx.resize(n);
+    LinearIndex(n, box, box.x1 - box.x0 + 1, box.y1 - box.y0 + 1, static_cast<std::int32_t>(cells),
+                t.cx.data(), t.cy.data(), t.cz.data(), dense.idx.data());
+    CountAndFlag(n, dr.count, static_cast<std::int32_t>(cells), min_points, dense, out.data());
+    return;
+  }
+
+  // Scattered points over a huge box: count in the hash table. It keeps the size the last
+  // frames needed (small tables stay in L1: distinct cells are far fewer than points), doubles
+  // whenever it passes half load, and never needs more than 2n slots.
+  for (auto* v : {&t.slot_of_pixel}) v->resize(n);
   int max_bits = 10;
   while ((std::size_t{1} << max_bits) < 2 * n) ++max_bits;
   t.bits = std::min(t.bits, max_bits);
@@ -130,7 +468,6 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
 
   // Per slot, the flag a point in it gets (slot -1, unusable, maps to entry 0 = no flag); the
   // per-pixel loop is then a branch-free table lookup.
-  const std::uint32_t min_points = static_cast<std::uint32_t>(o.min_points);
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kSparseCell);
   const std::size_t cap = std::size_t{1} << t.bits;
   t.flag_of_slot.resize(cap + 1);

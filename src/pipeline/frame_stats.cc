@@ -1,10 +1,14 @@
 #include "tofcam/pipeline/frame_stats.h"
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <string>
+#include <vector>
 
+#include "../filters/hot_loop.h"
+#include "../filters/simd.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -20,6 +24,102 @@ void RequireSize(bool same, const char* what) {
   if (!same) {
     throw Error(ErrorCode::kInvalidArgument,
                 std::string("frame statistics: ") + what + " differs in size from the distance");
+  }
+}
+
+// The per-pixel loops accumulate in eight explicit lanes (pixel i into lane i mod 8), summed in
+// a fixed order at the end: they vectorise, and the result does not depend on the CPU. Counts
+// are exact; the two double sums (ΔL, squared error) differ from a sequential sum by at most
+// n * 2^-53 of the sum of magnitudes (frame_stats_test.cc checks this against a sequential
+// reference).
+constexpr int kLanes = 8;
+
+struct KeptLanes {
+  std::int64_t kept[kLanes] = {};
+  double delta_l_sum[kLanes] = {};
+  std::int64_t delta_l_count[kLanes] = {};
+};
+
+constexpr std::int32_t kMaxBits = 0x7f7fffff;  // FLT_MAX: |x| <= it as bits is "finite"
+
+// kept = no reject bit; ΔL summed over kept pixels with a finite ΔL (NaN where there is none).
+TOFCAM_HOT_LOOP void KeptAndDeltaL(std::size_t n, const PixelFlags* __restrict f,
+                                   const float* __restrict dl, KeptLanes& out) {
+  using namespace simd;
+  D4 sum_lo = {}, sum_hi = {};
+  I8 kept = {}, count = {};
+  std::size_t i = 0;
+  for (; i + kLanes <= n; i += kLanes) {
+    const I8 k = (LoadFlags8(f + i) & kRejectMask) == 0;
+    const F8 x = LoadF8(dl + i);
+    const I8 use = k & (AbsBits(x) <= kMaxBits);
+    const F8 used = Select(use, x);
+    sum_lo += Low(used);
+    sum_hi += High(used);
+    kept -= k;  // masks are -1
+    count -= use;
+  }
+  for (int j = 0; j < kLanes; ++j) {
+    out.kept[j] = kept[j];
+    out.delta_l_sum[j] = j < 4 ? sum_lo[j] : sum_hi[j - 4];
+    out.delta_l_count[j] = count[j];
+  }
+  constexpr float kMax = std::numeric_limits<float>::max();
+  for (int j = 0; i < n; ++i, ++j) {
+    const bool k = (f[i].bits() & kRejectMask) == 0;
+    const bool use = k & (std::abs(dl[i]) <= kMax);
+    out.kept[j] += k ? 1 : 0;
+    out.delta_l_sum[j] += use ? static_cast<double>(dl[i]) : 0.0;
+    out.delta_l_count[j] += use ? 1 : 0;
+  }
+}
+
+struct TruthLanes {
+  std::int64_t bad[kLanes] = {};
+  std::int64_t bad_kept[kLanes] = {};
+  std::int64_t error_pixels[kLanes] = {};
+  double squared_error[kLanes] = {};
+};
+
+// error = measured - true; bad = not finite or |error| > bad_error; RMSE over kept pixels with
+// a finite error.
+TOFCAM_HOT_LOOP void Truth(std::size_t n, const PixelFlags* __restrict f, const float* __restrict d,
+                           const float* __restrict t, float bad_error, TruthLanes& out) {
+  using namespace simd;
+  D4 sq_lo = {}, sq_hi = {};
+  I8 bad = {}, bad_kept = {}, pixels = {};
+  std::size_t i = 0;
+  for (; i + kLanes <= n; i += kLanes) {
+    const I8 k = (LoadFlags8(f + i) & kRejectMask) == 0;
+    const F8 error = LoadF8(d + i) - LoadF8(t + i);
+    const I8 finite = AbsBits(error) <= kMaxBits;
+    const F8 magnitude = reinterpret_cast<F8>(AbsBits(error));
+    const I8 b = ~(magnitude <= bad_error);  // NaN, inf or beyond the threshold
+    const I8 use = k & finite;
+    const F8 e = Select(use, error);
+    const D4 lo = Low(e), hi = High(e);
+    sq_lo += lo * lo;
+    sq_hi += hi * hi;
+    bad -= b;
+    bad_kept -= b & k;
+    pixels -= use;
+  }
+  for (int j = 0; j < kLanes; ++j) {
+    out.bad[j] = bad[j];
+    out.bad_kept[j] = bad_kept[j];
+    out.error_pixels[j] = pixels[j];
+    out.squared_error[j] = j < 4 ? sq_lo[j] : sq_hi[j - 4];
+  }
+  constexpr float kMax = std::numeric_limits<float>::max();
+  for (int j = 0; i < n; ++i, ++j) {
+    const bool k = (f[i].bits() & kRejectMask) == 0;
+    const float error = d[i] - t[i];
+    const bool finite = std::abs(error) <= kMax;
+    const bool b = !(std::abs(error) <= bad_error);
+    out.bad[j] += b ? 1 : 0;
+    out.bad_kept[j] += (b & k) ? 1 : 0;
+    out.error_pixels[j] += (k & finite) ? 1 : 0;
+    out.squared_error[j] += (k & finite) ? static_cast<double>(error) * error : 0.0;
   }
 }
 
@@ -61,36 +161,40 @@ FrameStats ComputeFrameStats(const MetricFrame& frame, const FrameStatsOptions& 
   s.pixels = static_cast<int>(distance.size());
   s.has_truth = truth != nullptr;
 
-  double delta_l_sum = 0.0;
-  int delta_l_count = 0;
-  const float bad_error = static_cast<float>(options.bad_error_m);
   const std::size_t n = distance.size();
-  for (std::size_t i = 0; i < n; ++i) {
-    const bool kept = !has_flags || frame.flags[i].Valid();
-    if (kept) {
-      ++s.kept_pixels;
-      if (has_delta_l && std::isfinite(frame.delta_l_m[i])) {
-        delta_l_sum += frame.delta_l_m[i];
-        ++delta_l_count;
-      }
+  thread_local std::vector<PixelFlags> no_flags;
+  thread_local std::vector<float> no_delta_l;
+  if (!has_flags && no_flags.size() < n) no_flags.resize(n);
+  if (!has_delta_l && no_delta_l.size() < n) {
+    no_delta_l.assign(n, std::numeric_limits<float>::quiet_NaN());
+  }
+  const PixelFlags* flags = has_flags ? frame.flags.data() : no_flags.data();
+  KeptLanes kept;
+  KeptAndDeltaL(n, flags, has_delta_l ? frame.delta_l_m.data() : no_delta_l.data(), kept);
+  double delta_l_sum = 0.0;
+  std::int64_t delta_l_count = 0;
+  for (int j = 0; j < kLanes; ++j) {
+    s.kept_pixels += static_cast<int>(kept.kept[j]);
+    delta_l_sum += kept.delta_l_sum[j];
+    delta_l_count += kept.delta_l_count[j];
+  }
+  if (truth != nullptr) {
+    TruthLanes t;
+    Truth(n, flags, distance.data(), truth->radial_distance_m.data(),
+          static_cast<float>(options.bad_error_m), t);
+    std::int64_t bad = 0, bad_kept = 0, error_pixels = 0;
+    for (int j = 0; j < kLanes; ++j) {
+      bad += t.bad[j];
+      bad_kept += t.bad_kept[j];
+      error_pixels += t.error_pixels[j];
+      s.sum_squared_error_m2 += t.squared_error[j];
     }
-    if (truth == nullptr) continue;
-    const float measured = distance[i];
-    const float true_distance = truth->radial_distance_m[i];
-    const float error = measured - true_distance;
-    const bool finite = std::isfinite(error);
-    const bool bad = !finite || std::abs(error) > bad_error;
-    if (bad) {
-      ++s.bad_pixels;
-      if (!kept) ++s.bad_removed;
-    } else {
-      ++s.good_pixels;
-      if (kept) ++s.good_kept;
-    }
-    if (kept && finite) {
-      ++s.truth_error_pixels;
-      s.sum_squared_error_m2 += static_cast<double>(error) * error;
-    }
+    // Every pixel is bad or good; kept ones too.
+    s.bad_pixels = static_cast<int>(bad);
+    s.bad_removed = static_cast<int>(bad - bad_kept);
+    s.good_pixels = static_cast<int>(static_cast<std::int64_t>(n) - bad);
+    s.good_kept = static_cast<int>(s.kept_pixels - bad_kept);
+    s.truth_error_pixels = static_cast<int>(error_pixels);
   }
   s.valid_fraction = Ratio(s.kept_pixels, s.pixels);
   s.mean_delta_l_m = Ratio(delta_l_sum, delta_l_count);

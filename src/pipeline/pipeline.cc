@@ -5,6 +5,8 @@
 #include <string>
 #include <utility>
 
+#include "../filters/filter_internal.h"
+#include "fused_pass.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 #include "tofcam/filters/pixel_filters.h"
@@ -22,30 +24,6 @@ void ValidateSection(const char* section, F&& validate) {
     throw Error(e.code(), std::string(section) + ": " + e.what());
   }
 }
-
-void CheckCalibrationFits(const OffsetCalibration& c, const CameraInfo& camera) {
-  if (c.camera_model != camera.model) {
-    throw Error(ErrorCode::kMismatch, "calibration is for camera model '" + c.camera_model +
-                                          "', the camera is '" + camera.model + "'");
-  }
-  if (c.width != camera.width() || c.height != camera.height()) {
-    throw Error(ErrorCode::kMismatch, "calibration is " + std::to_string(c.width) + "x" +
-                                          std::to_string(c.height) + ", the camera is " +
-                                          std::to_string(camera.width()) + "x" +
-                                          std::to_string(camera.height()));
-  }
-  if (!(std::abs(c.modulation_frequency_hz - camera.modulation_frequency_hz) <=
-        1e-9 * camera.modulation_frequency_hz)) {
-    throw Error(ErrorCode::kMismatch, "calibration was made at " +
-                                          std::to_string(c.modulation_frequency_hz) +
-                                          " Hz, the camera runs at " +
-                                          std::to_string(camera.modulation_frequency_hz) + " Hz");
-  }
-}
-
-// Copies `src` into `dst`, reusing dst's buffer when the sizes agree (Image's copy assignment
-// goes through std::vector's, which keeps the capacity).
-void CopyInto(const Image<PixelFlags>& src, Image<PixelFlags>& dst) { dst = src; }
 
 }  // namespace
 
@@ -75,13 +53,14 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
     : options_(std::move(options)), camera_(camera) {
   options_.Validate();
   if (options_.calibration) {
-    CheckCalibrationFits(*options_.calibration, camera_);
+    pipeline_internal::CheckCalibrationFits(*options_.calibration, camera_);
   } else if (!options_.calibration_file.empty()) {
     throw Error(ErrorCode::kInvalidArgument,
                 "calibration file '" + options_.calibration_file +
                     "' is not loaded (LoadPipelineCalibration() in tofcam/io/pipeline_config.h)");
   }
   rays_ = MakeRayTable(camera_.intrinsics);
+  table_ = pipeline_internal::PrepareTable(options_.calibration, camera_);
 
   // The controller may not ask for a register the camera refuses; its own lower bound is 1.
   ControllerOptions& c = options_.controller;
@@ -121,27 +100,40 @@ void Pipeline::Process(const Frame& frame, PipelineResult& result) {
                                           camera_.model + " is " + std::to_string(camera_.width()) +
                                           "x" + std::to_string(camera_.height()));
   }
+  // Stages 1-3, the per-pixel filters and (when no neighbourhood filter follows) the cloud in
+  // one fused pass into the result's buffers: no allocation once their sizes are stable.
+  const FilterSetOptions& filters = options_.filters;
+  const bool neighbourhood =
+      filters.flying_pixel_enabled || filters.jump_edge_enabled || filters.weingarten_enabled;
   MetricFrame& m = result.frame;
-  ConvertToMetricInto(frame, options_.metric, m);
-  if (options_.calibration) ApplyCalibrationInPlace(m, *options_.calibration);
-  if (options_.accuracy_enabled) {
-    ComputeDeltaLInto(m, options_.accuracy, m.delta_l_m);
-  } else {
-    m.delta_l_m = Image<float>();
+  pipeline_internal::FusedStages s;
+  s.metric = options_.metric;
+  s.calibration = options_.calibration ? &*options_.calibration : nullptr;
+  s.table = table_ ? &*table_ : nullptr;
+  s.table_range_m = UnambiguousRangeM(camera_.modulation_frequency_hz);
+  s.accuracy = options_.accuracy_enabled ? &options_.accuracy : nullptr;
+  s.filters = filters;
+  s.rays = &rays_;
+  s.cloud = options_.cloud_enabled && !neighbourhood ? &options_.cloud : nullptr;
+  pipeline_internal::FusedOutputs out;
+  out.frame = &m;
+  out.input_flags = &result.input_flags;
+  out.filter_flags = &result.filter_flags;
+  out.cloud = &result.cloud;
+  pipeline_internal::RunFusedPass(frame, s, out);
+  if (neighbourhood) {
+    // m.flags = input flags | per-pixel filter bits, what the neighbourhood filters must treat
+    // as rejected (as in ApplyFilters); they OR into the filter flags.
+    filters_internal::NeighbourhoodFiltersInto(m, rays_, filters, result.filter_flags);
+    MergeFlags(m, result.filter_flags);
+    if (options_.cloud_enabled) MakePointCloudInto(m, rays_, result.cloud, options_.cloud);
   }
-  CopyInto(m.flags, result.input_flags);
-  result.filter_flags = ApplyFilters(m, rays_, options_.filters);
-  MergeFlags(m, result.filter_flags);
+  if (!options_.cloud_enabled) result.cloud = PointCloud();
 
   // Frame t sets the register of frame t + 1 (paper section III-A).
   result.next_integration_register =
       controller_ ? controller_->Update(m) : m.info.integration_time_register;
 
-  if (options_.cloud_enabled) {
-    MakePointCloudInto(m, rays_, result.cloud, options_.cloud);
-  } else {
-    result.cloud = PointCloud();
-  }
   result.stats = ComputeFrameStats(m, options_.stats);
   result.stats.next_integration_register = result.next_integration_register;
 }

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <random>
 #include <vector>
 
 #include "tofcam/core/error.h"
@@ -402,6 +403,85 @@ TEST(ControllerTest, ClippedPixelsCountEvenWhenInvalid) {
   EXPECT_EQ(q.Update(m), 56);  // 50 - 0.001 (10000 - 16000)
   off.clipped_intensity = 70000.0;
   EXPECT_THROW(off.Validate(), Error);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+// MeanControlIntensity as it was before the lane-wise loop (tofcam 0.1): a sequential double sum.
+double SequentialMean(const MetricFrame& frame, int row0, int row1, int col0, int col1,
+                      std::uint16_t exclude, double clipped) {
+  const Image<float>& channel = frame.has_intensity() ? frame.intensity : frame.amplitude;
+  double sum = 0.0;
+  long long count = 0;
+  for (int row = row0; row < row1; ++row) {
+    for (int col = col0; col < col1; ++col) {
+      const std::size_t i = static_cast<std::size_t>(row) * channel.width() + col;
+      const bool usable = frame.flags.empty() || !frame.flags[i].Any(exclude) ||
+                          (clipped > 0.0 && frame.has_intensity() && frame.intensity[i] >= clipped);
+      if (!usable || !std::isfinite(channel[i])) continue;
+      sum += channel[i];
+      ++count;
+    }
+  }
+  return count == 0 ? std::nan("") : sum / static_cast<double>(count);
+}
+
+MetricFrame RandomFrame(int w, int h, bool integers, std::uint32_t seed) {
+  MetricFrame m = Uniform(0.0f, w, h);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> value(0.0f, 65532.0f);
+  for (std::size_t i = 0; i < m.intensity.size(); ++i) {
+    const float v = value(rng);
+    m.intensity[i] = integers ? std::floor(v) : v;
+    if (rng() % 7 == 0) m.flags[i] = PixelFlags(Flag::kInvalid);
+    if (rng() % 11 == 0) m.flags[i] |= PixelFlags(Flag::kSaturated);
+    if (!integers && rng() % 97 == 0) m.intensity[i] = std::nanf("");
+    if (!integers && rng() % 89 == 0) m.intensity[i] = std::numeric_limits<float>::infinity();
+  }
+  return m;
+}
+
+TEST(ControllerTest, MeanEqualsTheSequentialSumExactlyOnRegisterValues) {
+  // Register-converted intensities are integers: every partial sum is an exact integer below
+  // 2^53, so the lane-wise sum must equal the sequential one bit for bit (and so must every
+  // register the controllers compute from it).
+  for (const auto& [w, h] : {std::pair{160, 124}, std::pair{157, 123}, std::pair{5, 3}}) {
+    const MetricFrame m = RandomFrame(w, h, true, 1);
+    const std::uint16_t exclude = static_cast<std::uint16_t>(Flag::kInvalid);
+    EXPECT_EQ(MeanControlIntensity(m, {}, exclude, 0.0),
+              SequentialMean(m, 0, h, 0, w, exclude, 0.0));
+    EXPECT_EQ(MeanControlIntensity(m, {}, exclude, 60000.5),
+              SequentialMean(m, 0, h, 0, w, exclude, 60000.5));
+    const RegionOfInterest roi{1, 2, h - 2, w - 3};
+    EXPECT_EQ(MeanControlIntensity(m, roi, exclude | static_cast<std::uint16_t>(Flag::kSaturated)),
+              SequentialMean(m, 1, h - 1, 2, w - 1,
+                             exclude | static_cast<std::uint16_t>(Flag::kSaturated), 0.0));
+  }
+}
+
+TEST(ControllerTest, MeanOfArbitraryValuesWithinTheReassociationBound) {
+  // Non-integer values: the eight lanes sum in another order than a sequential loop; both are
+  // within (n - 1) 2^-53 sum|v| of the exact sum, so they differ by at most 2 n 2^-53 sum|v|.
+  const int w = 157, h = 123;
+  const MetricFrame m = RandomFrame(w, h, false, 2);
+  const std::uint16_t exclude = static_cast<std::uint16_t>(Flag::kInvalid);
+  const double expected = SequentialMean(m, 0, h, 0, w, exclude, 0.0);
+  double magnitude = 0.0;
+  long long count = 0;
+  for (std::size_t i = 0; i < m.intensity.size(); ++i) {
+    if (!m.flags[i].Any(exclude) && std::isfinite(m.intensity[i])) {
+      magnitude += std::abs(m.intensity[i]);
+      ++count;
+    }
+  }
+  const double n = static_cast<double>(m.intensity.size());
+  const double bound = 2.0 * n * std::ldexp(1.0, -53) * magnitude / static_cast<double>(count);
+  EXPECT_NEAR(MeanControlIntensity(m, {}, exclude, 0.0), expected, bound);
+  EXPECT_GT(expected, 0.0);
 }
 
 }  // namespace

@@ -117,6 +117,107 @@ TEST(WeingartenCellFilterTest, MatchesMapReferenceOnScene) {
   EXPECT_GT(flagged, 200);
 }
 
+TEST(WeingartenCellFilterTest, ScatteredPointsOverAHugeBoxAreCountedToo) {
+  // 1 m cells and points up to 1e5 m apart along the axes: their bounding box (2e5 x 2e5 x 1e5
+  // cells) is far too big for a dense grid, so the filter counts in its hash table. Distances at
+  // cell centres keep the float arithmetic exact. Cell (10, 0, 0) holds 3 points, (-100000, 0, 0)
+  // 2, (0, 99999, 0) 1, (0, 0, 5) 1.
+  const std::vector<float> d = {10.5f, 10.5f, 99999.5f, 10.5f, 99999.5f, 5.5f, 99999.5f};
+  Line l = MakeLine(d);
+  const float rays[][3] = {{1, 0, 0},  {1, 0, 0}, {-1, 0, 0}, {1, 0, 0},
+                           {-1, 0, 0}, {0, 0, 1}, {0, 1, 0}};
+  for (int i = 0; i < 7; ++i) {
+    l.rays.x[i] = rays[i][0];
+    l.rays.y[i] = rays[i][1];
+    l.rays.z[i] = rays[i][2];
+  }
+  WeingartenCellOptions o;
+  o.voxel_size_m = 1.0;
+  o.min_points = 2;
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  const bool expected[] = {false, false, false, false, false, true, true};
+  for (int i = 0; i < 7; ++i) EXPECT_EQ(out[i].Has(Flag::kSparseCell), expected[i]) << i;
+  o.min_points = 3;
+  const Image<PixelFlags> three = WeingartenCellFilter(l.frame, l.rays, o);
+  const bool expected3[] = {false, false, true, false, true, true, true};
+  for (int i = 0; i < 7; ++i) EXPECT_EQ(three[i].Has(Flag::kSparseCell), expected3[i]) << i;
+}
+
+TEST(WeingartenCellFilterTest, FarPointWidensTheBoundButTheOccupiedBoxIsSmall) {
+  // Rays along all six axis directions and distances from 2.5 m to 199.5 m: the box bounded from
+  // the distance range and the ray directions alone (400^3 cells of 1 m) is too big for a dense
+  // grid, but the occupied cells span only 8 x 4 x 205. Cells: (3, 0, 0) x3, (0, -3, 0) x1,
+  // (0, 0, -5) x2, (0, 0, 199) x1, (-4, 0, 0) x2.
+  const std::vector<float> d = {3.5f, 2.5f, 3.5f, 4.5f, 199.5f, 3.5f, 4.5f, 3.5f, 3.5f};
+  const float rays[][3] = {{1, 0, 0},  {0, -1, 0}, {1, 0, 0}, {0, 0, -1}, {0, 0, 1},
+                           {-1, 0, 0}, {0, 0, -1}, {1, 0, 0}, {-1, 0, 0}};
+  Line l = MakeLine(d);
+  for (int i = 0; i < 9; ++i) {
+    l.rays.x[i] = rays[i][0];
+    l.rays.y[i] = rays[i][1];
+    l.rays.z[i] = rays[i][2];
+  }
+  WeingartenCellOptions o;
+  o.voxel_size_m = 1.0;
+  o.min_points = 2;
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  const bool expected[] = {false, true, false, false, true, false, false, false, false};
+  for (int i = 0; i < 9; ++i) EXPECT_EQ(out[i].Has(Flag::kSparseCell), expected[i]) << i;
+}
+
+TEST(WeingartenCellFilterTest, LongRunsOfUnusablePixelsAndOneCell) {
+  // 10000 pixels: every third unusable (NaN or rejected), the rest in one cell except pixel 5000
+  // alone in another. The counts must not mix the unusable pixels in, and repeated calls (the
+  // count array is reused and must be left at zero) must agree.
+  std::vector<float> d(10000, 2.05f);
+  for (std::size_t i = 0; i < d.size(); i += 3) d[i] = std::nanf("");
+  d[5000] = 3.05f;
+  Line l = MakeLine(d);
+  for (std::size_t i = 1; i < d.size(); i += 3) {
+    if (i % 2 == 0) l.frame.flags[i] = Flag::kHighDeltaL;
+  }
+  WeingartenCellOptions o;
+  o.min_points = 5000;  // the big cell holds 10000 - 3334 - 1666 - 1 = 4999 points: sparse
+  for (int rep = 0; rep < 2; ++rep) {
+    const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+    std::size_t flagged = 0;
+    for (std::size_t i = 0; i < d.size(); ++i) {
+      const bool usable = i % 3 != 0 && !(i % 3 == 1 && i % 2 == 0);
+      EXPECT_EQ(out[i].Has(Flag::kSparseCell), usable) << i;
+      flagged += out[i].Has(Flag::kSparseCell) ? 1 : 0;
+    }
+    EXPECT_EQ(flagged, 5000u);  // 4999 in the big cell plus pixel 5000
+  }
+  o.min_points = 4999;  // now the big cell is dense enough; pixel 5000 is still alone
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    EXPECT_EQ(out[i].Has(Flag::kSparseCell), i == 5000) << i;
+  }
+}
+
+TEST(WeingartenCellFilterTest, MostlyRejectedFrameCountsOnlyItsUsablePoints) {
+  // 1000 pixels, 900 already rejected (at their own distances, which must not count): of the
+  // 100 usable, 60 lie in cell z = 10, 3 in z = 20 and 37 in z = 30 (0.1 m cells). With most of
+  // the frame rejected the filter skips the unusable pixels instead of counting them.
+  std::vector<float> d(1000, 2.05f);  // the rejected ones would fill cell z = 20
+  Line l = MakeLine(d);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    if (i % 10 != 0) {
+      l.frame.flags[i] = Flag::kHighDeltaL;
+      continue;
+    }
+    const std::size_t k = i / 10;  // 0..99
+    l.frame.radial_distance_m[i] = k < 60 ? 1.05f : k < 63 ? 2.05f : 3.05f;
+  }
+  WeingartenCellOptions o;
+  o.min_points = 4;
+  const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const bool sparse = i % 10 == 0 && i / 10 >= 60 && i / 10 < 63;
+    EXPECT_EQ(out[i].Has(Flag::kSparseCell), sparse) << i;
+  }
+}
+
 TEST(WeingartenCellFilterTest, ErrorsAreReported) {
   const Line l = MakeLine({1.0f});
   WeingartenCellOptions o;

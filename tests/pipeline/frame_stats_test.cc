@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <string>
 
 #include "tofcam/core/error.h"
@@ -181,6 +182,87 @@ TEST(RunStatsAccumulatorTest, PoolsPixelCountsAcrossFrames) {
   EXPECT_DOUBLE_EQ(r.good_kept_fraction, 0.9);          // 9 of 10
   EXPECT_EQ(r.bad_pixels, 4);
   EXPECT_EQ(r.good_pixels, 10);
+}
+
+}  // namespace
+}  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+// ComputeFrameStats' per-pixel loop as it was before the lane-wise loops (tofcam 0.1).
+FrameStats SequentialStats(const MetricFrame& frame, float bad_error) {
+  FrameStats s;
+  double delta_l_sum = 0.0;
+  int delta_l_count = 0;
+  for (std::size_t i = 0; i < frame.radial_distance_m.size(); ++i) {
+    const bool kept = frame.flags[i].Valid();
+    if (kept) {
+      ++s.kept_pixels;
+      if (std::isfinite(frame.delta_l_m[i])) {
+        delta_l_sum += frame.delta_l_m[i];
+        ++delta_l_count;
+      }
+    }
+    const float error = frame.radial_distance_m[i] - frame.truth->radial_distance_m[i];
+    const bool finite = std::isfinite(error);
+    const bool bad = !finite || std::abs(error) > bad_error;
+    if (bad) {
+      ++s.bad_pixels;
+      if (!kept) ++s.bad_removed;
+    } else {
+      ++s.good_pixels;
+      if (kept) ++s.good_kept;
+    }
+    if (kept && finite) {
+      ++s.truth_error_pixels;
+      s.sum_squared_error_m2 += static_cast<double>(error) * error;
+    }
+  }
+  s.mean_delta_l_m = delta_l_sum / delta_l_count;
+  return s;
+}
+
+TEST(FrameStatsTest, LaneWiseLoopsAgreeWithTheSequentialLoop) {
+  // Counts exactly; the double sums (ΔL, squared error) within the reassociation bound
+  // 2 n 2^-53 sum|x| (lane order versus sequential order, see frame_stats.cc).
+  const int w = 157, h = 123;
+  MetricFrame f;
+  f.radial_distance_m = Image<float>(w, h);
+  f.delta_l_m = Image<float>(w, h);
+  f.flags = Image<PixelFlags>(w, h);
+  f.amplitude = Image<float>(w, h, 1000.0f);
+  GroundTruth truth;
+  truth.radial_distance_m = Image<float>(w, h);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+    truth.radial_distance_m[i] = 0.5f + 6.0f * u(rng);
+    f.radial_distance_m[i] = truth.radial_distance_m[i] + 0.2f * (u(rng) - 0.5f);
+    f.delta_l_m[i] = 0.1f * u(rng);
+    if (u(rng) < 0.2f) f.flags[i] = Flag::kHighDeltaL;
+    if (u(rng) < 0.02f) truth.radial_distance_m[i] = kInf;
+    if (u(rng) < 0.02f) f.delta_l_m[i] = kInf;
+    if (u(rng) < 0.01f) f.radial_distance_m[i] = std::nanf("");
+  }
+  f.truth = truth;
+  const FrameStats got = ComputeFrameStats(f, {});
+  const FrameStats want = SequentialStats(f, 0.05f);
+  EXPECT_EQ(got.kept_pixels, want.kept_pixels);
+  EXPECT_EQ(got.bad_pixels, want.bad_pixels);
+  EXPECT_EQ(got.bad_removed, want.bad_removed);
+  EXPECT_EQ(got.good_pixels, want.good_pixels);
+  EXPECT_EQ(got.good_kept, want.good_kept);
+  EXPECT_EQ(got.truth_error_pixels, want.truth_error_pixels);
+  EXPECT_GT(want.bad_removed, 0);
+  EXPECT_GT(want.good_kept, 0);
+  const double n = static_cast<double>(f.radial_distance_m.size());
+  const double u53 = std::ldexp(1.0, -53);
+  // All summands are non-negative, so sum|x| is the sum itself.
+  EXPECT_NEAR(got.sum_squared_error_m2, want.sum_squared_error_m2,
+              2.0 * n * u53 * want.sum_squared_error_m2);
+  EXPECT_NEAR(got.mean_delta_l_m, want.mean_delta_l_m, 2.0 * n * u53 * want.mean_delta_l_m);
+  EXPECT_GT(want.sum_squared_error_m2, 0.0);
 }
 
 }  // namespace

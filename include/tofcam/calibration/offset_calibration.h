@@ -16,6 +16,7 @@
 ///     l = (m - o - s (t - t_cal) + r_e) mod r_e,
 /// i.e. a per-frame scalar folded into the per-pixel offset.
 
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -39,6 +40,41 @@ struct DistanceCorrection {
   [[nodiscard]] double Evaluate(double distance_m) const noexcept;
   /// Throws Error(kInvalidArgument) naming the field for a malformed table.
   void Validate() const;
+};
+
+/// g resampled once onto a dense uniform grid and interpolated linearly: the form the per-pixel
+/// loop of ApplyCalibration evaluates (two table reads and one multiply-add, branch-free, so it
+/// vectorises; the Catmull-Rom segment search and cubic of DistanceCorrection::Evaluate do not).
+///
+/// Grid: x_j = origin_m + j * step_m, step_m = knot step / k for the smallest integer k with
+/// step_m <= `max_step_m` (so every knot is a grid point and each grid interval lies inside one
+/// Catmull-Rom segment, where g is a cubic), covering the knots within [0, range_m]. Outside the
+/// grid the end values hold, exactly as DistanceCorrection::Evaluate holds its end knots.
+/// Interpolation error on an interval: |g - linear| <= step_m^2 / 8 * max |g''|, recorded as
+/// `max_interpolation_error_m` (max |g''| from the knots in closed form). For 5 cm knots of a
+/// 2 cm wiggle of period L/4 at 1 mm steps this is < 4e-7 m, below a float ulp at L (4.8e-7 m);
+/// it is largest on the first segment, where the spline repeats the end knot
+/// (tests/calibration/offset_calibration_test.cc checks it against the spline).
+struct DenseDistanceCorrection {
+  static constexpr double kDefaultMaxStepM = 0.001;  ///< 1 mm.
+  static constexpr std::size_t kMaxSamples = std::size_t{1} << 22;
+
+  double origin_m = 0.0;             ///< Distance of sample 0, m.
+  double step_m = kDefaultMaxStepM;  ///< Sample spacing, m.
+  std::vector<float> values_m;       ///< g at each sample, m; at least 2.
+  /// Bound on |g(x) - linear interpolation| from step_m and the knots (see above), m.
+  double max_interpolation_error_m = 0.0;
+
+  /// Resamples `g` over [0, range_m] (range_m > 0: the unambiguous range L the distances lie
+  /// in). `max_step_m` in (0, 1]; the sample count is capped at kMaxSamples by coarsening k.
+  /// Throws Error(kInvalidArgument) for a malformed `g` (DistanceCorrection::Validate) or
+  /// arguments out of range.
+  [[nodiscard]] static DenseDistanceCorrection Resample(const DistanceCorrection& g, double range_m,
+                                                        double max_step_m = kDefaultMaxStepM);
+
+  /// Linear interpolation of the samples at `distance_m`, end values held outside the grid;
+  /// NaN maps to the first sample. Single precision, as in the per-pixel loop.
+  [[nodiscard]] float Evaluate(float distance_m) const noexcept;
 };
 
 /// Result of a noise calibration (FitDeltaLScale on static frames): the factor that turns ΔL of
@@ -98,17 +134,20 @@ struct OffsetCalibration {
 [[nodiscard]] double ExposureShiftM(const OffsetCalibration& calibration,
                                     double integration_time_us) noexcept;
 
-/// Applies eq. 1 (then g, if present) to every pixel. Pixels flagged kInvalid (no measurement)
-/// pass through untouched, flags kept; other flagged pixels (e.g. saturated) are corrected too,
-/// their flags kept, so displays of raw data stay calibrated. The calibration's pixel_flags are
-/// OR-ed in. The exposure term ExposureShiftM(calibration, frame.info.integration_time_us) is
-/// subtracted from every pixel. Throws Error(kMismatch) when the frame's size or modulation
-/// frequency differs from the calibration's, Error(kInvalidArgument) when the exposure term
-/// exceeds L/4 (a slope or integration time far outside anything physical).
+/// Applies eq. 1 (then g, if present, through its DenseDistanceCorrection) to every pixel. Pixels
+/// flagged kInvalid (no measurement) pass through untouched, flags kept; other flagged pixels (e.g.
+/// saturated) are corrected too, their flags kept, so displays of raw data stay calibrated. The
+/// calibration's pixel_flags are OR-ed in. The exposure term ExposureShiftM(calibration,
+/// frame.info.integration_time_us) is subtracted from every pixel. Throws Error(kMismatch) when the
+/// frame's size or modulation frequency differs from the calibration's, Error(kInvalidArgument)
+/// when the exposure term exceeds L/4 (a slope or integration time far outside anything physical).
 [[nodiscard]] MetricFrame ApplyCalibration(const MetricFrame& frame,
                                            const OffsetCalibration& calibration);
 
-/// In-place form of ApplyCalibration for a pipeline that owns its frame (no copy).
+/// In-place form of ApplyCalibration for a pipeline that owns its frame (no copy). The
+/// distance correction is evaluated through its DenseDistanceCorrection (1 mm), resampled on the
+/// first call with a given table and cached per thread (a later call with the same knots and
+/// range reuses it; the check compares the knots, not the pixels).
 void ApplyCalibrationInPlace(MetricFrame& frame, const OffsetCalibration& calibration);
 
 }  // namespace tofcam

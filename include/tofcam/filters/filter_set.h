@@ -45,4 +45,9 @@ struct FilterSetOptions {
 [[nodiscard]] Image<PixelFlags> ApplyFilters(const MetricFrame& frame, const RayTable& rays,
                                              const FilterSetOptions& options);
 
+/// Same as ApplyFilters, into `out`: its buffer is reused when it has the frame's size (no
+/// allocation in a per-frame loop), every pixel is overwritten.
+void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays,
+                      const FilterSetOptions& options, Image<PixelFlags>& out);
+
 }  // namespace tofcam

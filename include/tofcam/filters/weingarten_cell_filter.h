@@ -23,10 +23,11 @@ struct WeingartenCellOptions {
 
 /// kSparseCell on every usable point whose cell holds fewer than `min_points` usable points.
 /// Usable = no kRejectMask bit in `frame.flags` and a finite, positive distance; other pixels
-/// are neither counted nor flagged. Cells are kept in an open-addressing hash table reused
-/// between calls on the same thread (no per-frame allocation once warmed up). Coordinates more
-/// than 2^20 cells from the origin are clamped to the outermost cell. Throws Error(kMismatch)
-/// when `rays` is not the frame's size.
+/// are neither counted nor flagged. Points are counted in a dense array over the box of their
+/// cells (an open-addressing hash table when that box is too large), reused between calls on the
+/// same thread (no per-frame allocation once warmed up). Coordinates more than 2^20 cells from
+/// the origin are clamped to the outermost cell. Throws Error(kMismatch) when `rays` is not the
+/// frame's size.
 [[nodiscard]] Image<PixelFlags> WeingartenCellFilter(const MetricFrame& frame, const RayTable& rays,
                                                      const WeingartenCellOptions& options);
 

@@ -71,8 +71,8 @@ struct PipelineOptions {
   void Validate() const;
 };
 
-/// Output of one frame. Reused between frames by Pipeline::Process(frame, result): buffers keep
-/// their capacity, so a steady loop does not allocate beyond what the stages themselves return.
+/// Output of one frame. Reused between frames by Pipeline::Process(frame, result): every buffer
+/// is overwritten in place, so a steady loop does not reallocate them.
 struct PipelineResult {
   /// Calibrated distances, amplitude, intensity, ΔL (empty when accuracy is off), flags after
   /// all filters, info and truth of the input frame.
@@ -131,6 +131,7 @@ class Pipeline {
   PipelineOptions options_;
   CameraInfo camera_;
   RayTable rays_;
+  std::optional<DenseDistanceCorrection> table_;  // the calibration's, resampled once
   std::unique_ptr<IntegrationTimeController> controller_;
 };
 

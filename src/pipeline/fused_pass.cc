@@ -1,0 +1,113 @@
+#include "fused_pass.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "../calibration/calibration_kernel.h"
+#include "stage_kernels.h"
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam::pipeline_internal {
+
+void CheckCalibrationFits(const OffsetCalibration& c, const CameraInfo& camera) {
+  if (c.camera_model != camera.model) {
+    throw Error(ErrorCode::kMismatch, "calibration is for camera model '" + c.camera_model +
+                                          "', the camera is '" + camera.model + "'");
+  }
+  if (c.width != camera.width() || c.height != camera.height()) {
+    throw Error(ErrorCode::kMismatch, "calibration is " + std::to_string(c.width) + "x" +
+                                          std::to_string(c.height) + ", the camera is " +
+                                          std::to_string(camera.width()) + "x" +
+                                          std::to_string(camera.height()));
+  }
+  if (!(std::abs(c.modulation_frequency_hz - camera.modulation_frequency_hz) <=
+        1e-9 * camera.modulation_frequency_hz)) {
+    throw Error(ErrorCode::kMismatch, "calibration was made at " +
+                                          std::to_string(c.modulation_frequency_hz) +
+                                          " Hz, the camera runs at " +
+                                          std::to_string(camera.modulation_frequency_hz) + " Hz");
+  }
+}
+
+std::optional<DenseDistanceCorrection> PrepareTable(
+    const std::optional<OffsetCalibration>& calibration, const CameraInfo& camera) {
+  if (!calibration || !calibration->distance_correction) return std::nullopt;
+  return DenseDistanceCorrection::Resample(*calibration->distance_correction,
+                                           UnambiguousRangeM(camera.modulation_frequency_hz));
+}
+
+void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& out) {
+  MetricFrame& m = *out.frame;
+  // Every check and buffer sizing first, in the order the stage functions do them.
+  const kernels::MetricPlan metric =
+      kernels::PrepareMetric(frame, s.metric, m, /*keep_delta_l=*/s.accuracy != nullptr);
+  calibration_internal::CalibrationPlan calibration;
+  if (s.calibration != nullptr) {
+    calibration = calibration_internal::MakePlan(m, *s.calibration, nullptr);  // checks first
+    if (s.calibration->distance_correction) {
+      // The prepared table is for the camera's L, which eq. 1 has just checked against the
+      // frame's; the per-thread cache covers a caller without one.
+      const double range_m = UnambiguousRangeM(m.info.modulation_frequency_hz);
+      const DenseDistanceCorrection* table =
+          s.table != nullptr && s.table_range_m == range_m
+              ? s.table
+              : calibration_internal::CachedTable(*s.calibration, range_m);
+      calibration = calibration_internal::MakePlan(m, *s.calibration, table);
+    }
+  }
+  kernels::DeltaLPlan delta_l;
+  if (s.accuracy != nullptr) delta_l = kernels::PrepareDeltaL(m, *s.accuracy, m.delta_l_m);
+  const kernels::PixelFilterPlan filters = kernels::PreparePixelFilters(m, s.filters);
+  const int w = m.width(), h = m.height();
+  for (Image<PixelFlags>* image : {out.input_flags, out.filter_flags}) {
+    if (image != nullptr && !image->SameSize(w, h)) *image = Image<PixelFlags>(w, h);
+  }
+  if (s.cloud != nullptr) kernels::PrepareCloud(m, *s.rays, *out.cloud);
+
+  // The stages run one after the other over chunks of kChunkPixels, directly on the frame's
+  // buffers. Smaller, cache-sized blocks (512 pixels in an L1 scratch with the results copied
+  // out, non-temporal stores beyond 24 MiB; or 2K-64K pixels in place) were measured too, with
+  // bit-identical results, and were slower or no faster on the 2-core Zen 5 test machine: there
+  // each stage's working set stays in the 1 MiB L2 at SR-2 size and in the L3 at VGA and 1 MP,
+  // so the extra passes cost little, while per-block calls and copies (and the DRAM writes of
+  // streaming stores) cost more (docs/benchmarks.md). The chunk bounds the scratch.
+  constexpr std::size_t kChunk = kernels::kChunkPixels;
+  const std::size_t n = m.radial_distance_m.size();
+  thread_local std::vector<PixelFlags> raised_chunk;
+  const bool intensity = m.has_intensity();
+  const bool accuracy = s.accuracy != nullptr;
+  float* d = m.radial_distance_m.data();
+  float* a = m.amplitude.data();
+  float* in = intensity ? m.intensity.data() : nullptr;
+  float* dl = accuracy ? m.delta_l_m.data() : nullptr;
+  PixelFlags* f = m.flags.data();
+  for (std::size_t begin = 0; begin < n; begin += kChunk) {
+    const std::size_t len = std::min(kChunk, n - begin);
+    float* cd = d + begin;
+    float* ca = a + begin;
+    float* ci = intensity ? in + begin : nullptr;
+    float* cdl = accuracy ? dl + begin : nullptr;
+    PixelFlags* cf = f + begin;
+    kernels::ConvertSpan(metric, begin, len, cd, ca, ci, cf);
+    if (s.calibration != nullptr)
+      calibration_internal::CalibrateSpan(calibration, begin, len, cd, cf);
+    if (accuracy) kernels::DeltaLSpan(delta_l, len, ca, ci, cdl);
+    if (out.input_flags != nullptr) std::copy(cf, cf + len, out.input_flags->data() + begin);
+    if (out.filter_flags != nullptr) {
+      PixelFlags* raised = out.filter_flags->data() + begin;
+      kernels::PixelFiltersSpan(filters, len, cd, ca, ci, cdl, raised);
+      if (filters.any) kernels::OrFlags(len, cf, raised);
+    } else if (filters.any) {
+      kernels::PixelFiltersOrSpan(filters, len, cd, ca, ci, cdl, cf);  // straight into the flags
+    }
+    if (s.cloud != nullptr) {
+      kernels::CloudSpan(*s.rays, *s.cloud, begin, len, cd, cf, ca, ci, cdl, *out.cloud);
+    }
+  }
+}
+
+}  // namespace tofcam::pipeline_internal
