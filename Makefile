@@ -97,6 +97,7 @@ bench-peers: build
 	@$(BUILD)/bench/peers/pcl_outlier_removal $(PEERS_DIR) > $(PEERS_DIR)/pcl.txt
 	@OMP_NUM_THREADS=1 /usr/bin/python3 bench/peers/peer_outlier_removal.py $(PEERS_DIR) \
 	  --json $(PEERS_DIR)/peers.json | tee $(PEERS_DIR).txt
+	@cmake -S . -B $(BUILD) -DTOFCAM_BUILD_PEERS=OFF >/dev/null  # keep PCL out of later builds
 
 # The paper's experiments against ground truth (issue 5): CSVs and false-colour PNGs in
 # out/experiments, plots and the generated docs/results.md (committed).

@@ -7,6 +7,7 @@
 #include <optional>
 #include <utility>
 
+#include "sim_scenes.h"
 #include "tofcam/accuracy/delta_l.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
@@ -16,41 +17,14 @@
 namespace tofcam::bench {
 namespace {
 
-// The pavilion with the camera driving back and forth at 0.5 m/s while turning: every frame
-// sees a new pose (as in `tofcam bench` and sim_bench).
-sim::Scene MovingPavilion() {
-  sim::Scene s = sim::LoadBuiltinScene("pavilion");
-  s.camera.keys.clear();
-  for (int i = 0; i <= 250; ++i) {
-    sim::Keyframe k;
-    k.time_s = 4.0 * i;
-    k.position_m = {0, 0, i % 2 == 0 ? 0.0 : 2.0};
-    k.rotation_deg = {0, i % 2 == 0 ? -6.0 : 6.0, 0};
-    s.camera.keys.push_back(k);
-  }
-  return s;
-}
-
-// The SR-2 model with its field of view kept and the pixel count changed.
-sim::CameraModel ScaledSr2(int width, int height) {
-  sim::CameraModel m = sim::ResolveCameraModel("sr2");
-  CameraIntrinsics& k = m.intrinsics;
-  k.fx_px *= width / static_cast<double>(k.width);
-  k.fy_px *= height / static_cast<double>(k.height);
-  k.width = width;
-  k.height = height;
-  k.cx_px = (width - 1) / 2.0;
-  k.cy_px = (height - 1) / 2.0;
-  return m;
-}
-
 std::unique_ptr<SimulatedInput> Make(int width, int height) {
   auto in = std::make_unique<SimulatedInput>();
   sim::SimulatorOptions so;
   so.seed = 7;
   so.threads = 2;  // generating the inputs is not what is measured
   so.integration_time_register = 40;
-  sim::SimulatedCamera cam(MovingPavilion(), ScaledSr2(width, height), so);
+  sim::SimulatedCamera cam(MovingPavilion(),
+                           sim::WithResolution(sim::ResolveCameraModel("sr2"), width, height), so);
   in->info = cam.Info();
   in->rays = MakeRayTable(in->info.intrinsics);
   OffsetCalibration& c = in->calibration;

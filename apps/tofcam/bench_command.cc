@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "commands.h"
+#include "sim_scenes.h"  // bench/: the moving pavilion shared with the benchmarks
 #include "tofcam/accuracy/delta_l.h"
 #include "tofcam/calibration/offset_calibration.h"
 #include "tofcam/cloud/point_cloud.h"
@@ -59,35 +60,6 @@ struct BenchOptions {
   bool peers_only = false;  // only the peer export (no stage timings)
 };
 
-// The pavilion with the camera driving back and forth at 0.5 m/s while turning (as sim_bench):
-// every frame sees a new pose, so nothing can be cached.
-sim::Scene MovingPavilion() {
-  sim::Scene s = sim::LoadBuiltinScene("pavilion");
-  s.camera.keys.clear();
-  for (int i = 0; i <= 250; ++i) {
-    sim::Keyframe k;
-    k.time_s = 4.0 * i;
-    k.position_m = {0, 0, i % 2 == 0 ? 0.0 : 2.0};
-    k.rotation_deg = {0, i % 2 == 0 ? -6.0 : 6.0, 0};
-    s.camera.keys.push_back(k);
-  }
-  return s;
-}
-
-// The SR-2 model with its field of view kept and the pixel count changed. The pixel pitch stays,
-// so with the same f-number each pixel collects the same signal as an SR-2 pixel.
-sim::CameraModel ScaledSr2(int width, int height) {
-  sim::CameraModel m = sim::ResolveCameraModel("sr2");
-  CameraIntrinsics& k = m.intrinsics;
-  k.fx_px *= width / static_cast<double>(k.width);
-  k.fy_px *= height / static_cast<double>(k.height);
-  k.width = width;
-  k.height = height;
-  k.cx_px = (width - 1) / 2.0;
-  k.cy_px = (height - 1) / 2.0;
-  return m;
-}
-
 // The simulated frames of one resolution and everything the stages need besides.
 struct Input {
   std::string name;
@@ -116,7 +88,8 @@ Input MakeInput(int width, int height, int frames, int integration_register = 40
   so.seed = 7;
   so.threads = 2;  // generating the inputs is not what is measured
   so.integration_time_register = integration_register;
-  sim::SimulatedCamera cam(MovingPavilion(), ScaledSr2(width, height), so);
+  sim::SimulatedCamera cam(bench::MovingPavilion(),
+                           sim::WithResolution(sim::ResolveCameraModel("sr2"), width, height), so);
   in.info = cam.Info();
   in.rays = MakeRayTable(in.info.intrinsics);
   // The calibration a wall measurement would give: the simulator's own fixed-pattern offsets,
@@ -463,9 +436,9 @@ int SettledRegister(int frames, std::vector<int>& trajectory) {
   so.seed = 7;
   so.threads = 2;
   so.integration_time_register = 40;
-  sim::Scene scene = MovingPavilion();
+  sim::Scene scene = bench::MovingPavilion();
   scene.camera.keys.resize(1);
-  sim::SimulatedCamera cam(std::move(scene), ScaledSr2(160, 124), so);
+  sim::SimulatedCamera cam(std::move(scene), sim::ResolveCameraModel("sr2"), so);
   PipelineOptions po;
   po.controller.kind = ControllerKind::kMayIncremental;
   OffsetCalibration c;
@@ -693,14 +666,15 @@ void RunBench(const BenchOptions& o) {
     progress("simulator");
     const double t = std::max(o.min_time_s * 4, 1.0);
     for (int th : thread_counts) {
-      sim_rows.push_back({"SR-2 pavilion, moving camera, 2x2 supersampling, all effects", th,
-                          SimulatorFps(MovingPavilion(), sim::ResolveCameraModel("sr2"), th, t)});
+      sim_rows.push_back(
+          {"SR-2 pavilion, moving camera, 2x2 supersampling, all effects", th,
+           SimulatorFps(bench::MovingPavilion(), sim::ResolveCameraModel("sr2"), th, t)});
       sim_rows.push_back(
           {"SR-2 pavilion, static camera", th,
            SimulatorFps(sim::LoadBuiltinScene("pavilion"), sim::ResolveCameraModel("sr2"), th, t)});
-      sim_rows.push_back(
-          {"generic 640x480 model, pavilion, moving camera", th,
-           SimulatorFps(MovingPavilion(), sim::ResolveCameraModel("generic640x480"), th, t)});
+      sim_rows.push_back({"generic 640x480 model, pavilion, moving camera", th,
+                          SimulatorFps(bench::MovingPavilion(),
+                                       sim::ResolveCameraModel("generic640x480"), th, t)});
     }
   }
 

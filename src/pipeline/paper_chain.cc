@@ -6,20 +6,10 @@
 #include "fused_pass.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
+#include "validate_section.h"
 
 namespace tofcam {
-namespace {
-
-template <typename F>
-void ValidateSection(const char* section, F&& validate) {
-  try {
-    validate();
-  } catch (const Error& e) {
-    throw Error(e.code(), std::string(section) + ": " + e.what());
-  }
-}
-
-}  // namespace
+using pipeline_internal::ValidateSection;
 
 void PaperChainOptions::Validate() const {
   ValidateSection("metric_conversion", [&] { metric.Validate(); });

@@ -10,22 +10,10 @@
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 #include "tofcam/filters/pixel_filters.h"
+#include "validate_section.h"
 
 namespace tofcam {
-namespace {
-
-// Runs `validate` and prefixes its message with the option section, so a message from a stage
-// ("max_delta_l_m must be ...") says where in the configuration the value lives.
-template <typename F>
-void ValidateSection(const char* section, F&& validate) {
-  try {
-    validate();
-  } catch (const Error& e) {
-    throw Error(e.code(), std::string(section) + ": " + e.what());
-  }
-}
-
-}  // namespace
+using pipeline_internal::ValidateSection;
 
 void PipelineOptions::Validate() const {
   ValidateSection("metric_conversion", [&] { metric.Validate(); });

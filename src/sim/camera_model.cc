@@ -246,4 +246,20 @@ CameraModel ResolveCameraModel(const std::string& name_or_path) {
               "unknown camera model '" + name + "' (built-in: " + known + "; or a .yaml file)");
 }
 
+CameraModel WithResolution(CameraModel model, int width, int height) {
+  if (width < 1 || width > 16384 || height < 1 || height > 16384) {
+    throw Error(ErrorCode::kInvalidArgument, "camera resolution " + std::to_string(width) + " x " +
+                                                 std::to_string(height) +
+                                                 " outside 1..16384 per side");
+  }
+  CameraIntrinsics& k = model.intrinsics;
+  k.fx_px *= width / static_cast<double>(k.width);
+  k.fy_px *= height / static_cast<double>(k.height);
+  k.width = width;
+  k.height = height;
+  k.cx_px = (width - 1) / 2.0;
+  k.cy_px = (height - 1) / 2.0;
+  return model;
+}
+
 }  // namespace tofcam::sim

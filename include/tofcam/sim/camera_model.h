@@ -89,4 +89,10 @@ struct CameraModel {
 /// existing file, that file. Throws Error(kNotFound) listing the known names.
 [[nodiscard]] CameraModel ResolveCameraModel(const std::string& name_or_path);
 
+/// The same camera with another pixel count: the field of view, the principal point at the image
+/// centre, the pixel pitch and the radiometry stay, so each pixel collects the signal of one of
+/// the original's pixels (for scaling studies and benchmarks). Throws Error(kInvalidArgument)
+/// unless 1 <= width, height <= 16384.
+[[nodiscard]] CameraModel WithResolution(CameraModel model, int width, int height);
+
 }  // namespace tofcam::sim
