@@ -262,25 +262,31 @@ void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
   }
 }
 
+// Fills one Embree ray: origin, direction, near distance, infinite far, no hit yet.
+inline void SetRay(RTCRayHit& rh, const Eigen::Vector3f& org, const Eigen::Vector3f& dir,
+                   float tnear) {
+  rh.ray.org_x = org.x();
+  rh.ray.org_y = org.y();
+  rh.ray.org_z = org.z();
+  rh.ray.dir_x = dir.x();
+  rh.ray.dir_y = dir.y();
+  rh.ray.dir_z = dir.z();
+  rh.ray.tnear = tnear;
+  rh.ray.tfar = kInf;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.time = 0;
+  rh.ray.flags = 0;
+  rh.ray.id = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+}
+
 // The same one ray at a time (CPUs without native packets).
 void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
             RayBatch& b) {
   for (std::size_t i = 0; i < n; ++i) {
     RTCRayHit rh;
-    rh.ray.org_x = org.x();
-    rh.ray.org_y = org.y();
-    rh.ray.org_z = org.z();
-    rh.ray.dir_x = b.dx[i];
-    rh.ray.dir_y = b.dy[i];
-    rh.ray.dir_z = b.dz[i];
-    rh.ray.tnear = 0.f;
-    rh.ray.tfar = kInf;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.time = 0;
-    rh.ray.flags = 0;
-    rh.ray.id = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    SetRay(rh, org, Eigen::Vector3f(b.dx[i], b.dy[i], b.dz[i]), 0.f);
     rtcIntersect1(scene, ctx, &rh);
     b.t[i] = rh.ray.tfar;
     b.geom[i] = rh.hit.geomID;
@@ -1045,24 +1051,6 @@ struct SimulatedCamera::Impl {
     for (const Lamp& l : scene.lamps) key.lamps.push_back(l.OnAt(time_s) ? 1 : 0);
     key.valid = true;
     return key;
-  }
-
-  static void SetRay(RTCRayHit& rh, const Eigen::Vector3f& org, const Eigen::Vector3f& dir,
-                     float tnear) {
-    rh.ray.org_x = org.x();
-    rh.ray.org_y = org.y();
-    rh.ray.org_z = org.z();
-    rh.ray.dir_x = dir.x();
-    rh.ray.dir_y = dir.y();
-    rh.ray.dir_z = dir.z();
-    rh.ray.tnear = tnear;
-    rh.ray.tfar = kInf;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.time = 0;
-    rh.ray.flags = 0;
-    rh.ray.id = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   }
 
   // Casts one ray; returns the hit distance (inf on miss), geometric normal and object.
