@@ -14,7 +14,8 @@ void BM_ComputeDeltaL(benchmark::State& state) {
   tofcam::Image<float> dl;
   std::size_t i = 0;
   for (auto _ : state) {
-    tofcam::ComputeDeltaLInto(in.ready[i++ % in.ready.size()], {}, dl);  // reused, as in a pipeline
+    tofcam::ComputeDeltaLInto(in.ready[i++ % in.ready.size()], in.accuracy,
+                              dl);  // reused, as in a pipeline
     benchmark::DoNotOptimize(dl.data());
     benchmark::ClobberMemory();
   }

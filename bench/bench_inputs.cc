@@ -7,7 +7,7 @@
 #include <optional>
 #include <utility>
 
-#include "sim_scenes.h"
+#include "bench_calibration.h"
 #include "tofcam/accuracy/delta_l.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
@@ -27,26 +27,19 @@ std::unique_ptr<SimulatedInput> Make(int width, int height) {
                            sim::WithResolution(sim::ResolveCameraModel("sr2"), width, height), so);
   in->info = cam.Info();
   in->rays = MakeRayTable(in->info.intrinsics);
+  // Fitted once per process: every size has the SR-2 pixel.
+  static const double scale = FitBenchNoiseScale();
+  in->accuracy.scale = scale;
   OffsetCalibration& c = in->calibration;
-  c.camera_model = in->info.model;
-  c.width = width;
-  c.height = height;
-  c.modulation_frequency_hz = in->info.modulation_frequency_hz;
-  c.offset_m = cam.FixedPatternOffsetM();
-  DistanceCorrection g;
-  g.start_m = 0.3;
-  g.step_m = 0.05;
-  for (int k = 0; k < 150; ++k) {
-    g.correction_m.push_back(static_cast<float>(0.03 * std::sin(k * 0.05 * 4 * kPi / 7.5)));
-  }
-  c.distance_correction = g;
+  c = SimulatorOffsets(cam);
+  c.distance_correction = MadeUpDistanceTable();
   c.Validate();
   for (int i = 0; i < kFrames; ++i) {
     std::optional<Frame> f = cam.Grab();
     if (!f) throw Error(ErrorCode::kInternal, "simulator returned no frame");
     MetricFrame m = ConvertToMetric(*f);
     ApplyCalibrationInPlace(m, c);
-    ComputeDeltaLInto(m, {}, m.delta_l_m);
+    ComputeDeltaLInto(m, in->accuracy, m.delta_l_m);
     Frame bare = *f;
     bare.truth.reset();
     in->frames.push_back(std::move(*f));

@@ -7,6 +7,7 @@
 
 #include <vector>
 
+#include "tofcam/accuracy/delta_l.h"
 #include "tofcam/calibration/offset_calibration.h"
 #include "tofcam/core/camera.h"
 #include "tofcam/core/camera_intrinsics.h"
@@ -25,7 +26,10 @@ struct SimulatedInput {
   /// The same frames without ground truth: what a real camera delivers (the pipeline would
   /// otherwise copy 10 bytes of truth per pixel into every result).
   std::vector<Frame> camera_frames;
-  /// Converted, calibrated (eq. 1 + table) and with ΔL: the input of the later stages.
+  /// ΔL options with the scale of a noise calibration (FitBenchNoiseScale, bench_calibration.h),
+  /// as a calibrated pipeline uses them.
+  AccuracyOptions accuracy;
+  /// Converted, calibrated (eq. 1 + table) and with ΔL (`accuracy`): the input of later stages.
   std::vector<MetricFrame> ready;
 };
 

@@ -27,6 +27,7 @@ void BM_PaperChain(benchmark::State& state) {
   const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
   tofcam::PaperChainOptions o;
   o.calibration = in.calibration;
+  o.accuracy = in.accuracy;
   tofcam::PaperChain chain(o, in.info);
   MetricFrame m;
   tofcam::PointCloud cloud;
@@ -53,7 +54,7 @@ void BM_PaperChainStageByStage(benchmark::State& state) {
   for (auto _ : state) {
     tofcam::ConvertToMetricInto(in.camera_frames[i++ % in.camera_frames.size()], {}, m);
     tofcam::ApplyCalibrationInPlace(m, in.calibration);
-    tofcam::ComputeDeltaLInto(m, {}, m.delta_l_m);
+    tofcam::ComputeDeltaLInto(m, in.accuracy, m.delta_l_m);
     tofcam::ApplyFiltersInto(m, in.rays, threshold, raised);
     tofcam::MergeFlags(m, raised);
     tofcam::MakePointCloudInto(m, in.rays, cloud);
@@ -68,6 +69,7 @@ void RunPipeline(benchmark::State& state, bool all_filters) {
   const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
   tofcam::PipelineOptions o;
   o.calibration = in.calibration;
+  o.accuracy = in.accuracy;
   if (all_filters) {
     tofcam::FilterSetOptions& f = o.filters;
     f.range_enabled = f.amplitude_enabled = f.saturation_enabled = f.accuracy_enabled = true;

@@ -25,8 +25,8 @@
 #include <utility>
 #include <vector>
 
+#include "bench_calibration.h"  // bench/: the inputs and calibration of the benchmarks
 #include "commands.h"
-#include "sim_scenes.h"  // bench/: the moving pavilion shared with the benchmarks
 #include "tofcam/accuracy/delta_l.h"
 #include "tofcam/calibration/offset_calibration.h"
 #include "tofcam/cloud/point_cloud.h"
@@ -68,6 +68,7 @@ struct Input {
   CameraInfo info;
   RayTable rays;
   OffsetCalibration calibration;
+  OffsetCalibration calibration_eq1;  // the same offsets without the distance table
   std::vector<Frame> frames;
   // The same registers without ground truth: what a real camera delivers, used by the chain and
   // pipeline rows (a simulated frame's truth would add a 10-byte-per-pixel copy to each result).
@@ -76,10 +77,12 @@ struct Input {
   // The same with eq. 1 only: the table above is made up (its cost is real, its values are not
   // the simulator's wiggling), so the peer comparison's ground-truth counts use these frames.
   std::vector<MetricFrame> peer_ready;
+  AccuracyOptions accuracy;  // ΔL with the noise-calibrated scale (FitBenchNoiseScale)
   [[nodiscard]] std::int64_t pixels() const { return std::int64_t{width} * height; }
 };
 
-Input MakeInput(int width, int height, int frames, int integration_register = 40) {
+Input MakeInput(int width, int height, int frames, double delta_l_scale,
+                int integration_register = 40) {
   Input in;
   in.width = width;
   in.height = height;
@@ -92,23 +95,14 @@ Input MakeInput(int width, int height, int frames, int integration_register = 40
                            sim::WithResolution(sim::ResolveCameraModel("sr2"), width, height), so);
   in.info = cam.Info();
   in.rays = MakeRayTable(in.info.intrinsics);
+  in.accuracy.scale = delta_l_scale;
   // The calibration a wall measurement would give: the simulator's own fixed-pattern offsets,
   // plus a distance-dependent table so the costlier form of eq. 1 is the one timed.
   OffsetCalibration& c = in.calibration;
-  c.camera_model = in.info.model;
-  c.width = width;
-  c.height = height;
-  c.modulation_frequency_hz = in.info.modulation_frequency_hz;
-  c.offset_m = cam.FixedPatternOffsetM();
-  c.pixel_flags = Image<PixelFlags>(width, height);
-  DistanceCorrection g;
-  g.start_m = 0.3;
-  g.step_m = 0.05;
-  for (int k = 0; k < 150; ++k) {
-    g.correction_m.push_back(static_cast<float>(0.03 * std::sin(k * 0.05 * 4 * kPi / 7.5)));
-  }
-  OffsetCalibration eq1_only = c;
-  c.distance_correction = g;
+  c = bench::SimulatorOffsets(cam);
+  in.calibration_eq1 = c;
+  const OffsetCalibration& eq1_only = in.calibration_eq1;
+  c.distance_correction = bench::MadeUpDistanceTable();
   c.Validate();
   for (int i = 0; i < frames; ++i) {
     std::optional<Frame> f = cam.Grab();
@@ -116,9 +110,9 @@ Input MakeInput(int width, int height, int frames, int integration_register = 40
     MetricFrame m = ConvertToMetric(*f);
     MetricFrame p = m;
     ApplyCalibrationInPlace(m, c);
-    ComputeDeltaLInto(m, {}, m.delta_l_m);
+    ComputeDeltaLInto(m, in.accuracy, m.delta_l_m);
     ApplyCalibrationInPlace(p, eq1_only);
-    ComputeDeltaLInto(p, {}, p.delta_l_m);
+    ComputeDeltaLInto(p, in.accuracy, p.delta_l_m);
     Frame bare = *f;
     bare.truth.reset();
     in.frames.push_back(std::move(*f));
@@ -142,6 +136,7 @@ struct Workspace {
   Image<PixelFlags> raised;  // filter output, reused (ApplyFiltersInto)
   PointCloud cloud;
   std::optional<PaperChain> paper_chain;
+  std::optional<PaperChain> paper_chain_eq1;  // the paper's calibration alone (no table)
   std::unique_ptr<IntegrationTimeController> controller;
   std::optional<Pipeline> pipeline_default;
   std::optional<Pipeline> pipeline_all_filters;
@@ -186,9 +181,13 @@ void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
   ws.controller = MakeController({});
   PaperChainOptions pc;
   pc.calibration = in.calibration;
+  pc.accuracy = in.accuracy;
   ws.paper_chain.emplace(pc, in.info);
+  pc.calibration = in.calibration_eq1;
+  ws.paper_chain_eq1.emplace(pc, in.info);
   PipelineOptions po;
   po.calibration = in.calibration;
+  po.accuracy = in.accuracy;
   ws.pipeline_default.emplace(po, in.info);
   po.filters = AllFilters();
   ws.pipeline_all_filters.emplace(po, in.info);
@@ -222,7 +221,7 @@ std::vector<Stage> MakeStages() {
                  Sink(ws, m.radial_distance_m.data());
                }});
   s.push_back({"delta L (eq. 2)", 4 + 4 + 4, 1, true, [](Workspace& ws, std::size_t i) {
-                 ComputeDeltaLInto(ws.ready[i % ws.ready.size()], {}, ws.delta_l);
+                 ComputeDeltaLInto(ws.ready[i % ws.ready.size()], ws.input->accuracy, ws.delta_l);
                  Sink(ws, ws.delta_l.data());
                }});
   const std::pair<const char*, const char*> filters[] = {
@@ -280,13 +279,21 @@ std::vector<Stage> MakeStages() {
                                          ws.cloud);
                  Sink(ws, ws.cloud.x.data());
                }});
+  // The chain with the paper's calibration (eq. 1, section II-B) and without tofcam's
+  // distance-dependent table (issue 4's "go further"): the table lookup is half of the chain.
+  s.push_back({"paper chain, eq. 1 only (no table)", kChainBytes, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 ws.paper_chain_eq1->Process(ws.camera_frames[i % ws.camera_frames.size()],
+                                             ws.metric, ws.cloud);
+                 Sink(ws, ws.cloud.x.data());
+               }});
   // The same stages called one after the other on whole frames (same results).
   s.push_back(
       {"paper chain, stage by stage", kChainBytes, 1, true, [](Workspace& ws, std::size_t i) {
          MetricFrame& m = ws.metric;
          ConvertToMetricInto(ws.camera_frames[i % ws.camera_frames.size()], {}, m);
          ApplyCalibrationInPlace(m, ws.input->calibration);
-         ComputeDeltaLInto(m, {}, m.delta_l_m);
+         ComputeDeltaLInto(m, ws.input->accuracy, m.delta_l_m);
          static const FilterSetOptions threshold = OnlyFilter("accuracy");
          ApplyFiltersInto(m, ws.input->rays, threshold, ws.raised);
          MergeFlags(m, ws.raised);
@@ -432,22 +439,10 @@ bool IsBad(const MetricFrame& m, std::size_t i) {
 // t + 1. Settled: the register unchanged for 10 frames (at most `frames` frames). The scaled
 // models keep the SR-2 pixel pitch and optics, so the same register exposes them alike.
 int SettledRegister(int frames, std::vector<int>& trajectory) {
-  sim::SimulatorOptions so;
-  so.seed = 7;
-  so.threads = 2;
-  so.integration_time_register = 40;
-  sim::Scene scene = bench::MovingPavilion();
-  scene.camera.keys.resize(1);
-  sim::SimulatedCamera cam(std::move(scene), sim::ResolveCameraModel("sr2"), so);
+  sim::SimulatedCamera cam = bench::StaticStartCamera(40);
   PipelineOptions po;
   po.controller.kind = ControllerKind::kMayIncremental;
-  OffsetCalibration c;
-  c.camera_model = cam.Info().model;
-  c.width = 160;
-  c.height = 124;
-  c.modulation_frequency_hz = cam.Info().modulation_frequency_hz;
-  c.offset_m = cam.FixedPatternOffsetM();
-  po.calibration = c;
+  po.calibration = bench::SimulatorOffsets(cam);
   Pipeline pipeline(po, cam.Info());
   cam.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
   PipelineResult result;
@@ -602,13 +597,18 @@ void RunBench(const BenchOptions& o) {
     }
   }
 
+  progress("noise calibration (ΔL scale from 16 static SR-2 frames)");
+  const double delta_l_scale = bench::FitBenchNoiseScale();
+  progress("ΔL scale " + std::to_string(delta_l_scale));
+  report["delta_l_scale"] = delta_l_scale;
+
   const std::pair<int, int> sizes[] = {{160, 124}, {640, 480}, {1024, 1024}};
   std::vector<Input> inputs;
   for (const auto& [w, h] : sizes) {
     if (o.peers_only) break;
     progress("simulating " + std::to_string(o.frames) + " frames at " + std::to_string(w) + "x" +
              std::to_string(h));
-    inputs.push_back(MakeInput(w, h, o.frames));
+    inputs.push_back(MakeInput(w, h, o.frames, delta_l_scale));
   }
 
   std::vector<Row> rows;
@@ -690,10 +690,11 @@ void RunBench(const BenchOptions& o) {
     peers["integration_register"] = reg;
     peers["controller"] = "may-incremental";
     peers["controller_trajectory"] = trajectory;
+    peers["delta_l_scale"] = delta_l_scale;
     std::vector<Input> peer_inputs;
     for (const auto& [w, h] : sizes) {
       if (w * h > 640 * 480) continue;  // peers take seconds per megapixel frame
-      peer_inputs.push_back(MakeInput(w, h, o.frames, reg));
+      peer_inputs.push_back(MakeInput(w, h, o.frames, delta_l_scale, reg));
     }
     ExportPeers(peer_inputs, o.export_peers_dir, o.min_time_s, peers);
     if (o.peers_only) {

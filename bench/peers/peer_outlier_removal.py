@@ -77,7 +77,7 @@ def main():
             clouds.append((pcd, a[:, 3] > 0.5))
         for label, kind, a, b in METHODS:
             total_s = 0.0
-            bad = good = bad_removed = good_lost = 0
+            bad = good = bad_removed = good_lost = done = 0
             for pcd, is_bad in clouds:
                 best = float("inf")
                 for _ in range(REPEATS):
@@ -85,6 +85,9 @@ def main():
                     ind = run(pcd, kind, a, b)
                     best = min(best, time.perf_counter() - t0)
                 total_s += best
+                done += 1
+                print(f"peers: {res} {label}: frame {done}/{len(clouds)} {best:.1f} s",
+                      file=sys.stderr, flush=True)
                 kept = np.zeros(len(is_bad), dtype=bool)
                 kept[np.asarray(ind, dtype=np.int64)] = True
                 bad += int(is_bad.sum())
@@ -109,9 +112,11 @@ def main():
 
 def report(args, tof, rows, o3d_version):
     threads = os.environ.get("OMP_NUM_THREADS", "default")
-    print(f"Open3D {o3d_version or '(from json)'} (OMP_NUM_THREADS={threads}); PCL and tofcam "
-          f"single-threaded; exposure: {tof.get('controller', '?')} settled register "
-          f"{tof.get('integration_register', '?')}")
+    o3d = f"Open3D {o3d_version} (OMP_NUM_THREADS={threads})" if o3d_version else \
+        "Open3D rows from json (as run)"
+    print(f"{o3d}; PCL and tofcam single-threaded; exposure: {tof.get('controller', '?')} "
+          f"settled register {tof.get('integration_register', '?')}, ΔL scale "
+          f"{tof.get('delta_l_scale', 1.0):.4g}")
 
     def frac(r, k, n):
         return r[k] / max(r[n], 1)
