@@ -27,6 +27,16 @@ Line MakeLine(const std::vector<float>& d) {
   return l;
 }
 
+// Gives pixel i of the line the ray rays[i] (one per pixel).
+template <std::size_t N>
+void SetRays(Line& l, const float (&rays)[N][3]) {
+  for (std::size_t i = 0; i < N; ++i) {
+    l.rays.x[i] = rays[i][0];
+    l.rays.y[i] = rays[i][1];
+    l.rays.z[i] = rays[i][2];
+  }
+}
+
 TEST(WeingartenCellFilterTest, HandCountedCells) {
   // Cells of 0.1 m along z: [1.0, 1.1) holds 4 points, [2.0, 2.1) holds 2, [3.5, 3.6) holds 1.
   const Line l = MakeLine({1.01f, 1.02f, 2.05f, 1.03f, 3.55f, 1.04f, 2.06f});
@@ -126,11 +136,7 @@ TEST(WeingartenCellFilterTest, ScatteredPointsOverAHugeBoxAreCountedToo) {
   Line l = MakeLine(d);
   const float rays[][3] = {{1, 0, 0},  {1, 0, 0}, {-1, 0, 0}, {1, 0, 0},
                            {-1, 0, 0}, {0, 0, 1}, {0, 1, 0}};
-  for (int i = 0; i < 7; ++i) {
-    l.rays.x[i] = rays[i][0];
-    l.rays.y[i] = rays[i][1];
-    l.rays.z[i] = rays[i][2];
-  }
+  SetRays(l, rays);
   WeingartenCellOptions o;
   o.voxel_size_m = 1.0;
   o.min_points = 2;
@@ -152,11 +158,7 @@ TEST(WeingartenCellFilterTest, FarPointWidensTheBoundButTheOccupiedBoxIsSmall) {
   const float rays[][3] = {{1, 0, 0},  {0, -1, 0}, {1, 0, 0}, {0, 0, -1}, {0, 0, 1},
                            {-1, 0, 0}, {0, 0, -1}, {1, 0, 0}, {-1, 0, 0}};
   Line l = MakeLine(d);
-  for (int i = 0; i < 9; ++i) {
-    l.rays.x[i] = rays[i][0];
-    l.rays.y[i] = rays[i][1];
-    l.rays.z[i] = rays[i][2];
-  }
+  SetRays(l, rays);
   WeingartenCellOptions o;
   o.voxel_size_m = 1.0;
   o.min_points = 2;
