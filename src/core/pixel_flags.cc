@@ -34,6 +34,10 @@ std::string_view FlagName(Flag flag) noexcept {
       return "no-return";
     case Flag::kMotion:
       return "motion";
+    case Flag::kInconsistent:
+      return "inconsistent";
+    case Flag::kLowConfidence:
+      return "low-confidence";
   }
   return "unknown";
 }

@@ -31,14 +31,20 @@ TEST(PixelFlagsTest, FlagsAreDistinctSingleBits) {
     EXPECT_EQ(b & (b - 1), 0u) << FlagName(f) << " is not a single bit";
     EXPECT_TRUE(seen.insert(b).second) << FlagName(f) << " repeats a bit";
   }
-  EXPECT_EQ(seen.size(), 14u);
+  EXPECT_EQ(seen.size(), 16u);  // the 16-bit field is full
 }
 
 TEST(PixelFlagsTest, RejectMaskCoversFilterFlagsOnly) {
   // Filter decisions reject a pixel; pure ground-truth causes do not.
   for (Flag f : {Flag::kInvalid, Flag::kSaturated, Flag::kLowAmplitude, Flag::kHighDeltaL,
-                 Flag::kJumpEdge, Flag::kFlyingPixel, Flag::kOutOfRange, Flag::kSparseCell}) {
+                 Flag::kJumpEdge, Flag::kFlyingPixel, Flag::kOutOfRange, Flag::kSparseCell,
+                 Flag::kInconsistent, Flag::kLowConfidence}) {
     EXPECT_FALSE(PixelFlags(f).Valid()) << FlagName(f);
+  }
+  // Decisions that only a pipeline makes are not truth causes (kSaturated is both).
+  for (Flag f :
+       {Flag::kLowAmplitude, Flag::kHighDeltaL, Flag::kInconsistent, Flag::kLowConfidence}) {
+    EXPECT_FALSE(PixelFlags(f).Any(kTruthMask)) << FlagName(f);
   }
   for (Flag f : {Flag::kBeyondUnambiguous, Flag::kMixed, Flag::kMultipath, Flag::kScattering,
                  Flag::kNoReturn, Flag::kMotion}) {

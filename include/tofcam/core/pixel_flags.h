@@ -26,10 +26,19 @@ enum class Flag : std::uint16_t {
   kScattering = 1u << 11,  ///< Truth: in-camera scattering dominates the pixel's error.
   kNoReturn = 1u << 12,    ///< Truth: the ray hits nothing (open sky / beyond the scene).
   kMotion = 1u << 13,      ///< Truth: taps disagree because the scene moved during exposure.
+  /// Two measurements of the pixel disagree beyond their predicted σ (two modulation
+  /// frequencies that do not unwrap to one distance, HDR exposures that differ: motion or
+  /// multipath).
+  kInconsistent = 1u << 14,
+  /// Rejected by a confidence threshold: a camera's own confidence channel or tofcam's
+  /// combined per-pixel confidence.
+  kLowConfidence = 1u << 15,
 };
 
 /// All flags set by pipeline filters: a pixel with any of these is rejected.
-inline constexpr std::uint16_t kRejectMask = 0x017F;  // kInvalid..kOutOfRange | kSparseCell
+/// The 16 bits are all assigned; a new flag means widening PixelFlags (a recording-format change).
+inline constexpr std::uint16_t kRejectMask =
+    0xC17F;  // kInvalid..kOutOfRange | kSparseCell | kInconsistent | kLowConfidence
 /// All ground-truth cause bits.
 inline constexpr std::uint16_t kTruthMask = 0x3E82;
 
@@ -92,6 +101,6 @@ inline constexpr Flag kAllFlags[] = {
     Flag::kInvalid,    Flag::kSaturated,   Flag::kLowAmplitude, Flag::kHighDeltaL,
     Flag::kJumpEdge,   Flag::kFlyingPixel, Flag::kOutOfRange,   Flag::kBeyondUnambiguous,
     Flag::kSparseCell, Flag::kMixed,       Flag::kMultipath,    Flag::kScattering,
-    Flag::kNoReturn,   Flag::kMotion};
+    Flag::kNoReturn,   Flag::kMotion,      Flag::kInconsistent, Flag::kLowConfidence};
 
 }  // namespace tofcam
