@@ -8,7 +8,7 @@ packages=(
   libpng-dev libhdf5-dev libtinyobjloader-dev libnanoflann-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev clang-format clang-tidy
-  python3-numpy python3-matplotlib
+  python3-dev python3-numpy python3-matplotlib python3-pytest pybind11-dev
 )
 missing=()
 for p in "${packages[@]}"; do

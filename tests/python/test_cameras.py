@@ -1,0 +1,130 @@
+"""Cameras from Python: the simulator equals the command-line simulator bit for bit, scenes and
+models, importers of real cameras, playback."""
+
+import numpy as np
+import pytest
+
+import tofcam
+
+
+def test_simulator_frames_equal_the_cli_recording(cli, tmp_path):
+    path = tmp_path / "hand.h5"
+    cli("simulate", "--scene", "hand", "--frames", 3, "--seed", 7, "--integration-time-us",
+        4080, "--out", path)
+    recorded = tofcam.RecordingReader(path)
+    cam = tofcam.SimulatedCamera("hand", seed=7)
+    cam.integration_time_register = 16  # 16 x 255 µs = 4080 µs
+    for expected in recorded:
+        got = cam.grab()
+        for channel in ("distance", "amplitude", "intensity"):
+            np.testing.assert_array_equal(getattr(got, channel), getattr(expected, channel))
+        np.testing.assert_array_equal(got.truth.causes, expected.truth.causes)
+        np.testing.assert_array_equal(got.truth.radial_distance_m,
+                                      expected.truth.radial_distance_m)
+        np.testing.assert_array_equal(got.truth.sigma_m, expected.truth.sigma_m)
+        assert got.info.timestamp_ns == expected.info.timestamp_ns
+        assert got.info.integration_time_register == 16
+
+
+def test_same_seed_same_frames_other_seed_other_noise():
+    a = tofcam.SimulatedCamera("wall", seed=5, supersampling=1).grab()
+    b = tofcam.SimulatedCamera("wall", seed=5, supersampling=1).grab()
+    c = tofcam.SimulatedCamera("wall", seed=6, supersampling=1).grab()
+    np.testing.assert_array_equal(a.distance, b.distance)
+    assert (a.distance != c.distance).mean() > 0.5
+
+
+def test_options_keywords_and_objects():
+    opts = tofcam.SimulatorOptions(seed=3, supersampling=1, scattering=False)
+    assert (opts.seed, opts.supersampling, opts.scattering) == (3, 1, False)
+    cam = tofcam.SimulatedCamera("wall", options=opts, threads=2)
+    assert cam.options.threads == 2 and cam.options.seed == 3
+    with pytest.raises(TypeError, match="no option 'bogus'"):
+        tofcam.SimulatedCamera("wall", bogus=1)
+    with pytest.raises(tofcam.InvalidArgumentError, match="supersampling"):
+        tofcam.SimulatedCamera("wall", supersampling=99)
+    ideal = tofcam.SimulatorOptions.ideal()
+    assert not ideal.shot_noise and not ideal.scattering
+
+
+def test_scenes_from_names_parameters_yaml_and_errors(tmp_path):
+    assert "hand" in tofcam.builtin_scenes()
+    wall = tofcam.Scene.builtin("wall", distance_m=3)
+    assert wall.parameters["distance_m"] == 3.0
+    cam = tofcam.SimulatedCamera(wall, supersampling=1, options=tofcam.SimulatorOptions.ideal())
+    truth = cam.grab().truth.radial_distance_m
+    assert truth[61, 79] == pytest.approx(3.0, abs=0.01)
+    text = """
+name: box
+materials:
+  white: {albedo: 0.8}
+objects:
+  - {type: plane, material: white, position_m: [0, 0, 2.5], size_m: [10, 10]}
+"""
+    scene = tofcam.Scene.from_yaml(text, source="box.yaml")
+    cam = tofcam.SimulatedCamera(scene, supersampling=1, options=tofcam.SimulatorOptions.ideal())
+    assert cam.grab().truth.radial_distance_m[61, 79] == pytest.approx(2.5, abs=0.01)
+    with pytest.raises(tofcam.NotFoundError, match="nope"):
+        tofcam.Scene.builtin("nope")
+    with pytest.raises(tofcam.InvalidArgumentError, match="frobnicate"):
+        tofcam.Scene.builtin("wall", frobnicate=1)
+    with pytest.raises(tofcam.FormatError, match="bad.yaml"):
+        tofcam.Scene.from_yaml("objects: [", source="bad.yaml")
+    path = tmp_path / "box.yaml"
+    path.write_text(text)
+    assert tofcam.Scene.load(path).name == "box"
+    assert tofcam.SimulatedCamera(str(path), supersampling=1).scene.name == "box"
+
+
+def test_camera_models():
+    sr4000 = tofcam.CameraModel.builtin("sr4000")
+    assert (sr4000.intrinsics.width, sr4000.intrinsics.height) == (176, 144)
+    small = tofcam.CameraModel.builtin("sr2").with_resolution(80, 62)
+    cam = tofcam.SimulatedCamera("wall", model=small, supersampling=1)
+    assert cam.grab().distance.shape == (62, 80)
+    with pytest.raises(tofcam.NotFoundError):
+        tofcam.CameraModel.builtin("sr9000")
+
+
+def test_camera_settings_are_properties_with_checked_ranges():
+    cam = tofcam.SimulatedCamera("wall", supersampling=1)
+    cam.integration_time_register = 100
+    assert cam.integration_time_register == 100
+    assert cam.grab().info.integration_time_us == pytest.approx(100 * 255.0)
+    with pytest.raises(tofcam.InvalidArgumentError):
+        cam.integration_time_register = 1000
+    with pytest.raises(tofcam.InvalidArgumentError):
+        cam.modulation_frequency_hz = 12.3e6
+    cam.pan_angle_rad = 0.5
+    assert cam.pan_angle_rad == pytest.approx(0.5)
+
+
+def test_importers_keep_the_real_cameras_channels(data_dir):
+    adi = data_dir / "real" / "adi_adtf3175" / "frame_mode3.bin"
+    seq = tofcam.import_sequence(f"adi-interleaved:{adi}")
+    assert len(seq) == 1 and seq.camera.width == 512
+    frame = seq.frames[0]
+    # Independent decode of the file (5 bytes per pixel, depth uint16 LE in mm).
+    raw = np.fromfile(adi, np.uint8).reshape(512, 512, 5)
+    depth_mm = raw[..., 0].astype(np.uint16) | (raw[..., 1].astype(np.uint16) << 8)
+    metric = tofcam.to_metric(frame)
+    valid = depth_mm > 0
+    # Register = 8 x mm (lossless, L = 8.192 m): the metric distance is the depth in metres.
+    np.testing.assert_allclose(metric.radial_distance_m[valid], depth_mm[valid] / 1000.0,
+                               rtol=0, atol=1e-6)
+    assert (frame.source_flags[~valid] & int(tofcam.Flag.INVALID)).all()
+    cam = tofcam.ImportedCamera(seq)
+    assert len(cam) == 1 and cam.grab() is not None and cam.grab() is None
+    assert "adi-interleaved" in tofcam.import_formats()
+    with pytest.raises(tofcam.NotFoundError):
+        tofcam.import_sequence("adi-interleaved:/nonexistent.bin")
+    with pytest.raises(tofcam.InvalidArgumentError, match="unknown"):
+        tofcam.import_sequence("foo:bar")
+
+
+def test_finite_cameras_iterate_to_the_end(data_dir):
+    ifm = data_dir / "real" / "ifm_o3d303" / "o3d3xx.h5"
+    cam = tofcam.ImportedCamera(f"ifm-o3d3xx:{ifm}")
+    frames = list(cam)
+    assert len(frames) == 3
+    assert [f.info.sequence for f in frames] == sorted(f.info.sequence for f in frames)

@@ -1,0 +1,122 @@
+"""The pipeline from Python equals `tofcam run` on the same inputs; options round-trip the YAML
+configuration; results are views that follow `out=` reuse."""
+
+import csv
+
+import numpy as np
+import pytest
+
+import tofcam
+from conftest import read_ply
+
+# Every value that `tofcam run` would otherwise measure per camera is pinned, so both sides run
+# the same configuration.
+CONFIG = {
+    "accuracy": {"scale": 0.2},
+    "filters": {"jump_edge": {"enabled": True}, "amplitude": {"enabled": True,
+                                                            "min_amplitude": 50.0}},
+    "controller": {"kind": "may-incremental", "target_intensity": 16000.0,
+                   "gain_register_per_intensity": 0.002, "bias_register": 30},
+}
+
+
+def test_results_equal_the_cli_on_the_same_frames(cli, tmp_path):
+    options = tofcam.PipelineOptions.from_dict(CONFIG)
+    config = tmp_path / "config.yaml"
+    config.write_text(options.to_yaml())
+    out = tmp_path / "run"
+    cli("run", "--camera", "sim:hand", "--seed", 11, "--frames", 4, "--config", config,
+        "--out", out, "--ply-every", 1)
+    rows = list(csv.DictReader(open(out / "frames.csv")))
+
+    cam = tofcam.SimulatedCamera("hand", seed=11)
+    pipe = tofcam.Pipeline(cam, options)
+    cam.integration_time_register = pipe.initial_integration_register
+    for k in range(4):
+        res = pipe.process(cam.grab())
+        cam.integration_time_register = res.next_integration_register
+        # The CLI's cloud (valid points, binary PLY) equals ours bit for bit.
+        ply = read_ply(out / f"frame_{k:06d}.ply")
+        cloud = res.cloud
+        valid = cloud.flags == 0
+        valid &= np.isfinite(cloud.x)
+        np.testing.assert_array_equal(ply["x"], cloud.x[valid])
+        np.testing.assert_array_equal(ply["z"], cloud.z[valid])
+        np.testing.assert_array_equal(ply["delta_l"], cloud.delta_l_m[valid])
+        np.testing.assert_array_equal(ply["flags"], cloud.flags[valid])
+        row = rows[k]
+        assert int(row["integration_register"]) == res.stats.integration_time_register
+        assert int(row["next_register"]) == res.next_integration_register
+        assert int(row["kept_pixels"]) == res.stats.kept_pixels
+        assert float(row["mean_intensity"]) == pytest.approx(res.stats.mean_intensity, rel=1e-5)
+
+
+def test_options_round_trip_dict_and_yaml():
+    o = tofcam.PipelineOptions.from_dict(CONFIG)
+    d = o.to_dict()
+    assert d["filters"]["jump_edge"]["enabled"] is True
+    assert d["accuracy"]["scale"] == 0.2
+    assert d["controller"]["bias_register"] == 30 and isinstance(d["controller"]["bias_register"],
+                                                                  int)
+    assert tofcam.PipelineOptions.from_dict(d) == o
+    assert tofcam.PipelineOptions.from_yaml(o.to_yaml()) == o
+    assert "max_delta_l_m" in o.to_yaml()
+    # Defaults leave the camera-specific keys out (measured per camera), like --print-config.
+    assert "scale" not in tofcam.PipelineOptions().to_dict()["accuracy"]
+    merged = tofcam.merge_options(o, {"filters": {"jump_edge": {"max_angle_deg": 150.0}}})
+    assert merged.to_dict()["filters"]["jump_edge"] == {"enabled": True, "max_angle_deg": 150.0}
+    assert merged.to_dict()["accuracy"]["scale"] == 0.2
+
+
+def test_option_errors_name_the_key():
+    with pytest.raises(tofcam.FormatError, match="max_delta_l"):
+        tofcam.PipelineOptions(filters={"accuracy": {"max_delta_l": 0.1}})
+    with pytest.raises(tofcam.FormatError, match="kind"):
+        tofcam.PipelineOptions(controller={"kind": "pid"})
+    with pytest.raises(tofcam.InvalidArgumentError, match="max_delta_l_m"):
+        tofcam.PipelineOptions(filters={"accuracy": {"max_delta_l_m": -1.0}})
+    with pytest.raises(TypeError, match="unsupported type"):
+        tofcam.PipelineOptions(filters={"accuracy": {"max_delta_l_m": object()}})
+    with pytest.raises(TypeError):
+        tofcam.Pipeline(tofcam.CameraInfo(), options=3)
+
+
+def test_process_with_out_reuses_the_buffers():
+    cam = tofcam.SimulatedCamera("pavilion", seed=2)
+    pipe = tofcam.Pipeline(cam.info, {"accuracy": {"scale": 0.2}})
+    first = pipe.process(cam.grab())
+    before = first.frame.radial_distance_m
+    kept = before.copy()
+    second = pipe.process(cam.grab(), out=first)
+    assert second is first
+    assert np.shares_memory(before, second.frame.radial_distance_m)
+    assert not np.array_equal(kept, before)  # the old view now shows the new frame's noise
+    third = pipe.process(cam.grab())  # a fresh result: independent buffers
+    assert not np.shares_memory(third.frame.radial_distance_m, before)
+
+
+def test_cloud_is_distance_times_ray():
+    cam = tofcam.SimulatedCamera("wall", seed=1)
+    pipe = tofcam.Pipeline(cam.info, {"accuracy": {"scale": 0.2},
+                                      "point_cloud": {"nan_flags": []}})
+    res = pipe.process(cam.grab())
+    rays = cam.info.intrinsics.rays()
+    d = res.frame.radial_distance_m
+    np.testing.assert_allclose(res.cloud.xyz(), d[..., None] * rays, rtol=1e-6, atol=1e-6)
+    assert res.cloud.valid_points().shape == (res.cloud.count_valid(), 3)
+
+
+def test_rendering_and_stats():
+    cam = tofcam.SimulatedCamera("hand", seed=1)
+    pipe = tofcam.Pipeline(cam)
+    res = pipe.process(cam.grab())
+    raw, filtered = pipe.render_raw(res), pipe.render_filtered(res)
+    assert raw.dtype == np.uint8 and raw.shape[1:] == (160, 3) and raw.shape[0] >= 124
+    # Filtered images black out at least the pixels the filters rejected.
+    rejected = (res.frame.flags & tofcam.REJECT_MASK) != 0
+    assert (filtered[:124][rejected] == 0).all()
+    s = res.stats
+    assert s.pixels == 160 * 124 and 0 <= s.valid_fraction <= 1
+    assert s.kept_pixels == int((~rejected).sum())
+    assert pipe.controller_name == "may-proportional"
+    assert "Pipeline(camera='SR-2'" in repr(pipe)
