@@ -296,6 +296,7 @@ FrameStats RawStats(const PipelineResult& result, const PipelineOptions& options
   FrameStatsOptions stats = options.stats;
   stats.intensity_roi = options.controller.roi;
   stats.intensity_exclude_flags = options.controller.exclude_flags;
+  stats.intensity_clipped = options.controller.clipped_intensity;
   return ComputeFrameStats(raw, stats);
 }
 

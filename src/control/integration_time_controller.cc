@@ -49,6 +49,23 @@ const Image<float>& ControlChannel(const MetricFrame& frame) {
   return frame.has_intensity() ? frame.intensity : frame.amplitude;
 }
 
+// Largest change of the scheduled laws per frame, as a factor on the register: a dark or empty
+// frame (Ī near 0) would otherwise ask for an unbounded step.
+constexpr double kMaxScheduledFactor = 4.0;
+
+// The register the frame was taken with (the info's, else the controller's last output).
+double FrameRegister(const MetricFrame& frame, double fallback) {
+  return frame.info.integration_time_register > 0 ? frame.info.integration_time_register
+                                                  : fallback;
+}
+
+// V_p,t * D_t of the scheduled gain: loop_gain * c_t * (1 - I_A / Ī_t), limited so that the
+// incremental step c_t - V_p D_t stays within [c_t / 4, 4 c_t].
+double ScheduledCorrection(const ControllerOptions& o, double mean, double c) {
+  const double wanted = o.loop_gain * c * (1.0 - o.target_intensity / std::max(mean, 1e-9));
+  return std::clamp(wanted, c * (1.0 - kMaxScheduledFactor), c * (1.0 - 1.0 / kMaxScheduledFactor));
+}
+
 int RoundClamp(double c, int lo, int hi) {
   if (!std::isfinite(c)) return c > 0 ? hi : lo;
   return static_cast<int>(
@@ -87,7 +104,14 @@ void ControllerOptions::Validate() const {
   }
   if (!std::isfinite(gain_register_per_intensity) || gain_register_per_intensity < 0.0 ||
       gain_register_per_intensity > 1.0) {
-    Bad("gain_register_per_intensity (V_p)", Num(gain_register_per_intensity), "must be in [0, 1]");
+    Bad("gain_register_per_intensity (V_p)", Num(gain_register_per_intensity),
+        "must be in [0, 1] (0 = scheduled)");
+  }
+  if (!std::isfinite(loop_gain) || loop_gain <= 0.0 || loop_gain > 1.0) {
+    Bad("loop_gain", Num(loop_gain), "must be in (0, 1]");
+  }
+  if (!std::isfinite(frame_rate_hz) || frame_rate_hz < 0.0) {
+    Bad("frame_rate_hz", Num(frame_rate_hz), "must be >= 0 (0 = the camera's maximum)");
   }
   if (min_register < 1 || min_register > max_register) {
     Bad("min_register", std::to_string(min_register), "must be in [1, max_register]");
@@ -226,13 +250,15 @@ MayProportional::MayProportional(const ControllerOptions& options)
 }
 
 int MayProportional::Update(const MetricFrame& frame) {
-  const double mean =
-      MeanControlIntensity(frame, options_.roi, options_.exclude_flags, options_.clipped_intensity);
+  const double mean = ControlledMeanIntensity(frame, options_);
   if (std::isnan(mean)) return last_register_;
   const double deviation = mean - options_.target_intensity;  // D_t
-  last_register_ =
-      RoundClamp(-options_.gain_register_per_intensity * deviation + options_.bias_register,
-                 options_.min_register, options_.max_register);
+  const double correction =
+      options_.gain_register_per_intensity > 0.0
+          ? options_.gain_register_per_intensity * deviation
+          : ScheduledCorrection(options_, mean, FrameRegister(frame, last_register_));
+  last_register_ = RoundClamp(options_.bias_register - correction, options_.min_register,
+                              options_.max_register);
   return last_register_;
 }
 
@@ -244,6 +270,33 @@ void MayProportional::Reset(int current_register) {
   last_register_ = std::clamp(current_register, options_.min_register, options_.max_register);
 }
 
+double ControlledMeanIntensity(const MetricFrame& frame, const ControllerOptions& options) {
+  return MeanControlIntensity(frame, options.roi, options.exclude_flags, options.clipped_intensity);
+}
+
+int MaxRegisterForFrameRate(const CameraInfo& camera, double frame_rate_hz) {
+  if (!std::isfinite(frame_rate_hz) || frame_rate_hz <= 0.0) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "frame rate " + Num(frame_rate_hz) + " Hz must be positive and finite");
+  }
+  const double budget_us = 1e6 / frame_rate_hz - camera.readout_time_us;
+  const auto fits = [&](int reg) { return camera.IntegrationTimeUs(reg) <= budget_us + 1e-9; };
+  if (!fits(camera.min_integration_register)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "frame rate " + Num(frame_rate_hz) + " Hz is out of reach for " + camera.model +
+                    ": its shortest frame takes " +
+                    Num((camera.IntegrationTimeUs(camera.min_integration_register) +
+                         camera.readout_time_us) *
+                        1e-3) +
+                    " ms");
+  }
+  if (camera.integration_time_step_us <= 0.0) return camera.max_integration_register;
+  const double reg = std::floor((budget_us - camera.integration_time_base_us) /
+                                camera.integration_time_step_us + 1e-9);
+  return static_cast<int>(std::clamp(reg, static_cast<double>(camera.min_integration_register),
+                                     static_cast<double>(camera.max_integration_register)));
+}
+
 // --- MayIncremental --------------------------------------------------------------------------
 
 MayIncremental::MayIncremental(const ControllerOptions& options)
@@ -252,10 +305,12 @@ MayIncremental::MayIncremental(const ControllerOptions& options)
 }
 
 int MayIncremental::Update(const MetricFrame& frame) {
-  const double mean =
-      MeanControlIntensity(frame, options_.roi, options_.exclude_flags, options_.clipped_intensity);
+  const double mean = ControlledMeanIntensity(frame, options_);
   if (!std::isnan(mean)) {
-    state_ -= options_.gain_register_per_intensity * (mean - options_.target_intensity);
+    // The scheduled gain uses the real-valued state as c_t: the frame's register is its rounding.
+    state_ -= options_.gain_register_per_intensity > 0.0
+                  ? options_.gain_register_per_intensity * (mean - options_.target_intensity)
+                  : ScheduledCorrection(options_, mean, state_);
     state_ = std::clamp(state_, static_cast<double>(options_.min_register),
                         static_cast<double>(options_.max_register));
   }

@@ -103,11 +103,16 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("gain_register_per_intensity",
             Measured<double>{o.controller.gain_register_per_intensity,
                              defaults.controller.gain_register_per_intensity},
-            "V_p, registers per intensity unit, [0, 1]; left out: the calibration's set point");
+            "V_p, registers per intensity unit, [0, 1], 0 = scheduled (loop_gain c_t / I_t); left "
+            "out: the calibration's set point");
     v.Field("bias_register",
             Measured<int>{o.controller.bias_register, defaults.controller.bias_register},
             "c_0, [min_register, max_register]; also the first frame's register; left out: the "
             "calibration's set point");
+    v.Field("loop_gain", o.controller.loop_gain,
+            "loop gain of the scheduled V_p (when gain_register_per_intensity is 0), (0, 1]");
+    v.Field("frame_rate_hz", o.controller.frame_rate_hz,
+            "Hz, >= 0: the integration time leaves this frame rate; 0 = the camera's maximum");
     v.Field("min_register", o.controller.min_register, "[1, max_register]");
     v.Field("max_register", o.controller.max_register, "[min_register, 65535]");
     v.Section("roi", "pixels the mean intensity is taken over; rows or cols 0 = whole image", [&] {

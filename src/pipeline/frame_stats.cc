@@ -134,6 +134,9 @@ void FrameStatsOptions::Validate() const {
       intensity_roi.cols < 0) {
     throw Error(ErrorCode::kInvalidArgument, "stats.intensity_roi must not be negative");
   }
+  if (!(intensity_clipped >= 0.0 && intensity_clipped <= 65532.0)) {
+    throw Error(ErrorCode::kInvalidArgument, "stats.intensity_clipped must be in [0, 65532]");
+  }
 }
 
 FrameStats ComputeFrameStats(const MetricFrame& frame, const FrameStatsOptions& options) {
@@ -156,8 +159,8 @@ FrameStats ComputeFrameStats(const MetricFrame& frame, const FrameStatsOptions& 
   s.timestamp_s = static_cast<double>(frame.info.timestamp_ns) * 1e-9;
   s.integration_time_register = frame.info.integration_time_register;
   s.integration_time_us = frame.info.integration_time_us;
-  s.mean_intensity =
-      MeanControlIntensity(frame, options.intensity_roi, options.intensity_exclude_flags);
+  s.mean_intensity = MeanControlIntensity(frame, options.intensity_roi,
+                                          options.intensity_exclude_flags, options.intensity_clipped);
   s.pixels = static_cast<int>(distance.size());
   s.has_truth = truth != nullptr;
 

@@ -53,8 +53,20 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
   // The controller may not ask for a register the camera refuses; its own lower bound is 1.
   ControllerOptions& c = options_.controller;
   const int lo = std::max({c.min_register, camera_.min_integration_register, 1});
-  const int hi = std::min(c.max_register, camera_.max_integration_register);
+  int hi = std::min(c.max_register, camera_.max_integration_register);
   const bool camera_has_register = camera_.max_integration_register >= 1;
+  if (camera_has_register && options_.controller_enabled) {
+    // Camera rate: the frame (integration + readout) must fit the requested period.
+    c.frame_rate_hz = c.frame_rate_hz > 0.0 ? c.frame_rate_hz : camera_.max_frame_rate_hz;
+    const int fps_max = MaxRegisterForFrameRate(camera_, c.frame_rate_hz);
+    if (lo > fps_max) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "controller.min_register " + std::to_string(lo) + " does not fit " +
+                      std::to_string(c.frame_rate_hz) + " frames/s (at most register " +
+                      std::to_string(fps_max) + ")");
+    }
+    hi = std::min(hi, fps_max);
+  }
   if (!camera_has_register) {
     // Recordings and imported real-camera files have no integration time to set: nothing to
     // control, so the loop stays open instead of refusing the source.
@@ -75,6 +87,7 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
 
   options_.stats.intensity_roi = c.roi;
   options_.stats.intensity_exclude_flags = c.exclude_flags;
+  options_.stats.intensity_clipped = c.clipped_intensity;
 }
 
 Pipeline::~Pipeline() = default;

@@ -78,6 +78,7 @@ CameraInfo CameraModel::Info(double modulation_frequency_hz) const {
   info.min_integration_register = min_integration_register;
   info.max_integration_register = max_integration_register;
   info.max_frame_rate_hz = max_frame_rate_hz;
+  info.readout_time_us = readout_time_us;
   info.has_intensity = true;
   info.has_ground_truth = true;
   return info;

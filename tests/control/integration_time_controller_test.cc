@@ -189,6 +189,82 @@ TEST(ControllerClosedLoopTest, PositionFormKeepsAnOffsetIncrementalFormDoesNot) 
   EXPECT_GT(std::abs(a - b), 5);
 }
 
+// A frame of a proportional plant taken at `reg`: Ī = k reg + ambient.
+MetricFrame PlantFrame(double k, int reg, double ambient = 0.0) {
+  MetricFrame m = Uniform(static_cast<float>(k * reg + ambient));
+  m.info.integration_time_register = reg;
+  return m;
+}
+
+TEST(ScheduledGainTest, HandComputedSteps) {
+  // V_p = 0: V_p,t = loop_gain c_t / Ī_t; with Ī = 20000 at c_t = 40, I_A = 16000, gain 0.5:
+  // the correction is 0.5 * 40 * (1 - 16000 / 20000) = 4 registers.
+  MayIncremental inc(Opts(ControllerKind::kMayIncremental, 0.0, 40));
+  EXPECT_EQ(inc.Update(PlantFrame(500.0, 40)), 36);  // 40 - 4
+  // Next frame at the real state 36: 36 - 0.5 * 36 * (1 - 16000 / 20000) = 32.4 -> 32.
+  EXPECT_EQ(inc.Update(PlantFrame(20000.0 / 36, 36)), 32);
+  // The printed position form with the same scheduled V_p: c_0 - V_p,t D_t = 40 - 0.5 * 36 *
+  // 0.2 = 36.4 -> 36 (c_t read from the frame's register).
+  MayProportional prop(Opts(ControllerKind::kMayProportional, 0.0, 40));
+  EXPECT_EQ(prop.Update(PlantFrame(20000.0 / 36, 36)), 36);
+  // A dark frame asks for an unbounded step: at most a factor 4 per frame (40 -> 160).
+  MayIncremental dark(Opts(ControllerKind::kMayIncremental, 0.0, 40));
+  EXPECT_EQ(dark.Update(PlantFrame(2.5, 40)), 160);
+  EXPECT_EQ(dark.Update(PlantFrame(2.5, 160)), 255);  // then the bound
+  // A fixed V_p is the printed law, untouched by the schedule (loop_gain is ignored).
+  ControllerOptions fixed = Opts(ControllerKind::kMayIncremental, 0.001, 40);
+  fixed.loop_gain = 1.0;
+  MayIncremental f(fixed);
+  EXPECT_EQ(f.Update(PlantFrame(500.0, 40)), 36);  // 40 - 0.001 * 4000
+}
+
+TEST(ScheduledGainTest, ConvergesGeometricallyInEveryScene) {
+  // On Ī = k c the scheduled incremental law is c_{t+1} = c_t - g (c_t - c_A), c_A = I_A / k:
+  // the error shrinks by (1 - g) = 0.5 per frame whatever k, from a dim hall (k = 2 per
+  // register, c_A = 8000: beyond the bound) to a hand at 20 cm (k = 4000, c_A = 4).
+  for (double k : {100.0, 400.0, 1000.0, 4000.0}) {
+    MayIncremental inc(Opts(ControllerKind::kMayIncremental, 0.0, 40));
+    const double target = 16000.0 / k;
+    int reg = 40;
+    double previous_error = std::abs(40.0 - target);
+    for (int t = 0; t < 12; ++t) {
+      reg = inc.Update(Uniform(static_cast<float>(k * reg)));
+      // Halved each frame, plus the register rounding of the plant input and of the output (the
+      // plant sees the rounded register: up to 0.5 each).
+      const double error = std::abs(reg - target);
+      EXPECT_LE(error, 0.5 * previous_error + 1.0) << "k " << k << " t " << t;
+      previous_error = error;
+    }
+    EXPECT_NEAR(reg, target, 1.0) << "k " << k;
+  }
+  MayIncremental dim(Opts(ControllerKind::kMayIncremental, 0.0, 40));
+  EXPECT_EQ(RunLoop(dim, 2.0, 40, 10), 255);  // I_A out of reach: pinned at the bound
+  // The same gains that make a fixed V_p oscillate on the hand (k V_p = 4000 * 2.5e-3 = 10)
+  // settle with the schedule: no change over the last frames.
+  MayIncremental hand(Opts(ControllerKind::kMayIncremental, 0.0, 40));
+  const int settled = RunLoop(hand, 4000.0, 40, 20);
+  EXPECT_EQ(hand.Update(Uniform(static_cast<float>(4000.0 * settled))), settled);
+}
+
+TEST(MaxRegisterForFrameRateTest, HandComputed) {
+  CameraInfo sr2;  // 255 µs per register, registers 1..255
+  sr2.readout_time_us = 4000.0;
+  // (1e6 / 30 - 4000) / 255 = 115.03 -> 115.
+  EXPECT_EQ(MaxRegisterForFrameRate(sr2, 30.0), 115);
+  EXPECT_EQ(MaxRegisterForFrameRate(sr2, 1.0), 255);      // capped by the camera
+  EXPECT_EQ(MaxRegisterForFrameRate(sr2, 200.0), 3);      // 1000 µs / 255 = 3.9
+  EXPECT_THROW((void)MaxRegisterForFrameRate(sr2, 300.0), Error);  // 3.3 ms < readout
+  EXPECT_THROW((void)MaxRegisterForFrameRate(sr2, 0.0), Error);
+  EXPECT_THROW((void)MaxRegisterForFrameRate(sr2, std::nan("")), Error);
+  // SR-4000 style timing: 300 µs + n x 100 µs, no readout: (1e6 / 50 - 300) / 100 = 197.
+  CameraInfo sr4000;
+  sr4000.integration_time_base_us = 300.0;
+  sr4000.integration_time_step_us = 100.0;
+  sr4000.min_integration_register = 0;
+  sr4000.max_integration_register = 255;
+  EXPECT_EQ(MaxRegisterForFrameRate(sr4000, 50.0), 197);
+}
+
 TEST(ControllerClosedLoopTest, VendorHistogramConvergesWhateverTheGain) {
   // The multiplicative step is scale-free: for k = 100 and k = 5000 per register the 8-bit
   // position x = k c / 256 ends within the deadband of desired_pos = 45 (or at a bound).
@@ -238,6 +314,10 @@ TEST(ControllerOptionsTest, RejectsOutOfRangeValues) {
   expect_bad([](ControllerOptions& o) { o.vendor_gain = 0; });
   expect_bad([](ControllerOptions& o) { o.vendor_max_step_register = 0; });
   expect_bad([](ControllerOptions& o) { o.vendor_deadband = -1; });
+  expect_bad([](ControllerOptions& o) { o.loop_gain = 0; });
+  expect_bad([](ControllerOptions& o) { o.loop_gain = 1.5; });
+  expect_bad([](ControllerOptions& o) { o.frame_rate_hz = -1; });
+  expect_bad([](ControllerOptions& o) { o.frame_rate_hz = std::nan(""); });
   EXPECT_THROW(MayIncremental(Opts(ControllerKind::kMayIncremental, 2.0, 50)), Error);
 }
 

@@ -158,8 +158,8 @@ TEST(PipelineConfigTest, PrintedDefaultsNameEveryStage) {
   const std::string text = PipelineConfigToYaml(PipelineOptions{});
   for (const char* key :
        {"metric_conversion:", "calibration:", "accuracy:", "filters:", "controller:",
-        "point_cloud:", "false_color:", "stats:", "kind: may-proportional", "max_delta_l_m: 0.07",
-        "exclude_flags: [invalid]"}) {
+        "point_cloud:", "false_color:", "stats:", "kind: may-incremental", "max_delta_l_m: 0.07",
+        "exclude_flags: [invalid]", "loop_gain: 0.5", "frame_rate_hz: 0"}) {
     EXPECT_NE(text.find(key), std::string::npos) << key;
   }
 }

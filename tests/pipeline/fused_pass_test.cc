@@ -218,6 +218,7 @@ PipelineResult ReferenceProcess(const PipelineOptions& o, const RayTable& rays,
   FrameStatsOptions so = o.stats;
   so.intensity_roi = o.controller.roi;
   so.intensity_exclude_flags = o.controller.exclude_flags;
+  so.intensity_clipped = o.controller.clipped_intensity;
   r.stats = ComputeFrameStats(m, so);
   return r;
 }

@@ -118,5 +118,5 @@ def test_rendering_and_stats():
     s = res.stats
     assert s.pixels == 160 * 124 and 0 <= s.valid_fraction <= 1
     assert s.kept_pixels == int((~rejected).sum())
-    assert pipe.controller_name == "may-proportional"
+    assert pipe.controller_name == "may-incremental"  # the default
     assert "Pipeline(camera='SR-2'" in repr(pipe)

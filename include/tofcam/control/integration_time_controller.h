@@ -19,6 +19,16 @@
 ///  - MayIncremental:  c_{t+1} = c_t - V_p * D_t. c_t is kept as a real number between frames
 ///    (so small corrections accumulate instead of rounding away) and clamped to the bounds
 ///    (anti-windup); the register is its nearest integer.
+///
+/// V_p = 0 (the default) schedules the gain from the frame itself: V_p,t = loop_gain * c_t / Ī_t,
+/// c_t the frame's register. Ī is nearly proportional to the integration time (signal, ambient
+/// and dark charge all are; tof-notes §2), so c_t / Ī_t is the inverse plant gain 1 / k of the
+/// current scene and the loop gain V_p,t * k is `loop_gain` in every scene: a fixed V_p stable
+/// for a hand at 20 cm (k ~ 10^3 per register) barely moves in a dim hall (k ~ 2), and one that
+/// moves the hall limit-cycles on the hand. With the incremental form and loop_gain in (0, 1] the
+/// error shrinks by (1 - loop_gain) per frame on a proportional plant; an ambient offset only
+/// lowers the effective gain. The step is limited to a factor 4 per frame (dark frames). A
+/// calibration's set point (tofcam calibrate --setpoint) gives the printed law its fixed V_p.
 ///  - VendorHistogram: tof-notes §4 (CSEM/MESA): intensity reduced to 8 bits (I >> 8),
 ///    histogram, x = the smallest 8-bit value that at most percent_over_pos % of the pixels
 ///    exceed; our step law (the vendor's is unpublished) is a damped multiplicative step
@@ -36,11 +46,16 @@
 #include <string>
 #include <string_view>
 
+#include "tofcam/core/camera.h"
 #include "tofcam/core/frame.h"
 
 namespace tofcam {
 
 enum class ControllerKind { kMayProportional, kMayIncremental, kVendorHistogram, kFixed };
+
+/// Register units of intensity at which a pixel counts as clipped by default: 98 % of full scale,
+/// as SaturationOptions::max_peak.
+inline constexpr double kDefaultClippedIntensity = 64221.0;
 
 /// "may-proportional", "may-incremental", "vendor-histogram", "fixed".
 [[nodiscard]] std::string_view ControllerKindName(ControllerKind kind) noexcept;
@@ -57,12 +72,19 @@ struct RegionOfInterest {
 };
 
 struct ControllerOptions {
-  ControllerKind kind = ControllerKind::kMayProportional;
+  /// The default is the incremental law with a scheduled gain: it holds Ī at I_A in every scene
+  /// without a calibration. The paper's printed law is kMayProportional.
+  ControllerKind kind = ControllerKind::kMayIncremental;
   /// I_A: intensity set point, register units, (0, 65532]. The paper: 15000..18000 worked.
   double target_intensity = 16000.0;
-  /// V_p: registers per intensity unit, [0, 1]. The default corrects about a quarter of the
-  /// error per frame for a scene whose intensity grows by 1000 per register step.
-  double gain_register_per_intensity = 2.5e-4;
+  /// V_p: registers per intensity unit, [0, 1]; 0 = scheduled from each frame (see above).
+  double gain_register_per_intensity = 0.0;
+  /// Loop gain of the scheduled V_p (used when gain_register_per_intensity is 0), (0, 1].
+  double loop_gain = 0.5;
+  /// Frame rate the integration time must allow, Hz: the Pipeline lowers max_register so that
+  /// integration + readout fit 1 / frame_rate_hz (MaxRegisterForFrameRate). 0 = the camera's
+  /// maximum frame rate (CameraInfo::max_frame_rate_hz; SR-2: 30); >= 0.
+  double frame_rate_hz = 0.0;
   /// c_0: bias of the proportional law, start value of the others, Fixed's register.
   /// [min_register, max_register].
   int bias_register = 40;
@@ -75,7 +97,7 @@ struct ControllerOptions {
   /// SwissRanger pixel whose taps all clipped reports amplitude 0 (so kInvalid: no phase) with
   /// intensity at full scale; it is what tells the controller to back off and must count. The
   /// default is 98 % of full scale, as SaturationOptions::max_peak.
-  double clipped_intensity = 64221.0;
+  double clipped_intensity = kDefaultClippedIntensity;
 
   // VendorHistogram (tof-notes §4; SR-3000 vendor settings by default).
   double percent_over_pos = 10.0;     ///< percentOverPos, % of pixels above x, [0, 100).
@@ -171,6 +193,18 @@ class Fixed final : public IntegrationTimeController {
 [[nodiscard]] double MeanControlIntensity(const MetricFrame& frame, const RegionOfInterest& roi,
                                           std::uint16_t exclude_flags,
                                           double clipped_intensity = 0.0);
+
+/// Ī_t exactly as a controller with `options` sees it (its ROI, excluded flags and clipped rule):
+/// the one function behind the controllers and every reported mean intensity.
+[[nodiscard]] double ControlledMeanIntensity(const MetricFrame& frame,
+                                             const ControllerOptions& options);
+
+/// The largest register whose frame fits the period 1 / frame_rate_hz: integration time
+/// (camera.IntegrationTimeUs) + camera.readout_time_us <= 1e6 / frame_rate_hz. Throws
+/// Error(kInvalidArgument) when frame_rate_hz is not positive and finite, or when even
+/// camera.min_integration_register does not fit (naming the rate and the shortest frame).
+/// At most camera.max_integration_register.
+[[nodiscard]] int MaxRegisterForFrameRate(const CameraInfo& camera, double frame_rate_hz);
 
 /// One step of an integration-time sweep (paper fig. 3): the register and the frame's means.
 struct IntegrationSweepPoint {

@@ -24,6 +24,9 @@ struct CameraInfo {
   int min_integration_register = 1;
   int max_integration_register = 255;
   double max_frame_rate_hz = 30.0;  ///< Upper bound of the frame rate.
+  /// Dead time per frame besides integration, µs (>= 0): a frame takes at least integration +
+  /// readout. 0 when the source does not say (recordings, importers).
+  double readout_time_us = 0.0;
   bool has_intensity = true;        ///< False for sources without an offset channel.
   bool has_ground_truth = false;    ///< True for simulators.
 

@@ -24,10 +24,12 @@ struct FrameStatsOptions {
   /// 5 cm: above the SR-2's shot noise at a good exposure (~1-2 cm), below the scattering and
   /// multipath errors the accuracy filter is meant to remove (decimetres).
   double bad_error_m = 0.05;
-  /// Region and excluded flags of the mean intensity (the controller's, so the status line shows
-  /// what the controller sees).
+  /// Region, excluded flags and clipped rule of the mean intensity: the controller's
+  /// (ControllerOptions roi, exclude_flags, clipped_intensity; the Pipeline copies them), so the
+  /// reported Ī is the one the controller acts on (ControlledMeanIntensity).
   RegionOfInterest intensity_roi;
   std::uint16_t intensity_exclude_flags = static_cast<std::uint16_t>(Flag::kInvalid);
+  double intensity_clipped = kDefaultClippedIntensity;  ///< [0, 65532]; 0 = no clipped rule.
 
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;
