@@ -263,6 +263,17 @@ void RunCalibrate(const CalibrateOptions& o) {
     wall.controller = ControllerOptions{};
     wall.controller.kind = ParseControllerKind(o.controller);
   }
+  if (wall.controller.kind == ControllerKind::kFixed) {
+    // A stated exposure: the register the camera is opened with.
+    if (o.source.integration_time_register <= 0) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "--controller fixed calibrates at a stated exposure: give it with "
+                  "--integration-register N");
+    }
+    wall.controller.max_register = std::max(wall.controller.max_register,
+                                            o.source.integration_time_register);
+    wall.controller.bias_register = o.source.integration_time_register;
+  }
   SweepOptions sweep;
   sweep.from_m = o.sweep_from_m;
   sweep.to_m = o.sweep_to_m;
@@ -289,6 +300,16 @@ void RunCalibrate(const CalibrateOptions& o) {
       "frames, drift %.4f mm/s\n",
       o.wall_distance_m, report.integration_register, calibration.integration_time_us,
       report.exposure_frames, report.warmup_frames, report.drift_m_per_s * 1e3);
+  if (report.exposure_at_bound != 0) {
+    std::fprintf(stderr,
+                 "calibrate: warning: the exposure controller stopped at its %s register %d: "
+                 "the wall is too %s for its set point and the offsets were measured at that "
+                 "bound. State an exposure with --controller fixed --integration-register N, "
+                 "or move the wall %s.\n",
+                 report.exposure_at_bound > 0 ? "largest" : "smallest",
+                 report.integration_register, report.exposure_at_bound > 0 ? "dark" : "bright",
+                 report.exposure_at_bound > 0 ? "closer" : "further away");
+  }
   std::printf(
       "offsets: mean %.2f mm, rms %.2f mm, noise %.2f mm per frame (%.2f mm after %d "
       "frames), %d uncalibrated pixels\n",

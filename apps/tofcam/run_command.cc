@@ -63,6 +63,7 @@ struct RunOptions {
   std::string out;
   int png_every = 0;
   int ply_every = 0;
+  double fps = -1.0;  // < 0: the config's controller.frame_rate_hz
   bool print_config = false;
   CameraSourceOptions source;
 };
@@ -82,6 +83,14 @@ std::string FrameName(std::uint64_t index, const char* suffix) {
   return buffer;
 }
 
+// Frames per second over `intervals` frame intervals spanning `seconds` of camera time.
+std::string CameraRate(long long intervals, double seconds) {
+  if (intervals < 1 || !(seconds > 0.0)) return "-";
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.1f/s", static_cast<double>(intervals) / seconds);
+  return buffer;
+}
+
 nlohmann::json Real(double value) {
   return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
 }
@@ -90,6 +99,10 @@ PipelineOptions ResolveOptions(const RunOptions& o, std::set<std::string>* given
   PipelineOptions options =
       o.config.empty() ? PipelineOptions{} : LoadPipelineConfig(o.config, given_keys);
   if (!o.calibration.empty()) options.calibration_file = o.calibration;
+  if (o.fps >= 0.0) {
+    options.controller.frame_rate_hz = o.fps;
+    if (given_keys != nullptr) given_keys->insert("controller.frame_rate_hz");
+  }
   if (!o.controller.empty()) {
     if (o.controller == "none") {
       options.controller_enabled = false;
@@ -179,13 +192,22 @@ void RunRun(const RunOptions& o) {
   }
   std::fprintf(stderr, "run: dL scale %.4g from %s\n", options.accuracy.scale,
                from.delta_l_scale.c_str());
-  if (options.controller_enabled) {
-    std::fprintf(stderr, "run: controller I_A %.0f, V_p %.3g, c_0 %d from %s\n",
-                 options.controller.target_intensity,
-                 options.controller.gain_register_per_intensity, options.controller.bias_register,
-                 from.controller.c_str());
-  }
   Pipeline pipeline(options, camera->Info());
+  if (controlling) {
+    const ControllerOptions& c = pipeline.options().controller;
+    char vp[64];
+    if (c.gain_register_per_intensity > 0.0) {
+      std::snprintf(vp, sizeof vp, "%.3g", c.gain_register_per_intensity);
+    } else {
+      std::snprintf(vp, sizeof vp, "scheduled (loop gain %.2g)", c.loop_gain);
+    }
+    std::fprintf(stderr,
+                 "run: controller %s, I_A %.0f, V_p %s, c_0 %d from %s; registers %d..%d "
+                 "(%.0f frames/s)\n",
+                 std::string(pipeline.ControllerName()).c_str(), c.target_intensity, vp,
+                 c.bias_register, from.controller.c_str(), c.min_register, c.max_register,
+                 c.frame_rate_hz);
+  }
 
   std::fprintf(csv.get(), "frame,%s,elapsed_s\n", FrameStatsCsvHeader().c_str());
   SigintGuard sigint;
@@ -196,6 +218,9 @@ void RunRun(const RunOptions& o) {
   Clock::time_point last_flush = start;
   long long status_frames = 0;
   long long done = 0;
+  // Camera time (the frames' timestamps): the frame rate the camera delivered, as opposed to the
+  // processing rate (frames per wall-clock second).
+  std::int64_t first_timestamp_ns = 0, last_timestamp_ns = 0, status_timestamp_ns = 0;
   bool end_of_stream = false;
 
   while (done < o.frames && !g_interrupted.load()) {
@@ -204,6 +229,8 @@ void RunRun(const RunOptions& o) {
       end_of_stream = true;
       break;
     }
+    if (done == 0) first_timestamp_ns = status_timestamp_ns = frame->info.timestamp_ns;
+    last_timestamp_ns = frame->info.timestamp_ns;
     pipeline.Process(*frame, result);
     if (controlling) camera->SetIntegrationTimeRegister(result.next_integration_register);
     const FrameStats& s = result.stats;
@@ -229,15 +256,17 @@ void RunRun(const RunOptions& o) {
     }
     const double since_status = std::chrono::duration<double>(now - last_status).count();
     if (since_status >= 1.0 || done == o.frames) {
+      const double camera_s = static_cast<double>(last_timestamp_ns - status_timestamp_ns) * 1e-9;
       std::fprintf(stderr,
-                   "run: frame %lld/%lld  %.1f frames/s  register %d (%.2f ms)  intensity %.0f  "
-                   "valid %.1f%%  mean dL %s  RMSE %s\n",
+                   "run: frame %lld/%lld  %.1f frames/s (camera %s)  register %d (%.2f ms)  "
+                   "intensity %.0f  valid %.1f%%  mean dL %s  RMSE %s\n",
                    done, o.frames, status_frames / std::max(since_status, 1e-9),
-                   s.integration_time_register, s.integration_time_us * 1e-3, s.mean_intensity,
-                   s.valid_fraction * 100.0, Milli(s.mean_delta_l_m).c_str(),
-                   s.has_truth ? Milli(s.rmse_m).c_str() : "n/a");
+                   CameraRate(status_frames - 1, camera_s).c_str(), s.integration_time_register,
+                   s.integration_time_us * 1e-3, s.mean_intensity, s.valid_fraction * 100.0,
+                   Milli(s.mean_delta_l_m).c_str(), s.has_truth ? Milli(s.rmse_m).c_str() : "n/a");
       last_status = now;
       status_frames = 0;
+      status_timestamp_ns = last_timestamp_ns;
     }
   }
   if (std::fflush(csv.get()) != 0) {
@@ -271,6 +300,11 @@ void RunRun(const RunOptions& o) {
   json["bad_error_m"] = options.stats.bad_error_m;
   json["elapsed_s"] = elapsed_s;
   json["mean_frames_per_s"] = Real(elapsed_s > 0 ? summary.frames / elapsed_s : NAN);
+  // Frames per second of camera time (timestamps), what the integration time allowed.
+  const double camera_s = static_cast<double>(last_timestamp_ns - first_timestamp_ns) * 1e-9;
+  json["camera_frames_per_s"] =
+      Real(summary.frames > 1 && camera_s > 0 ? (summary.frames - 1) / camera_s : NAN);
+  json["frame_rate_limit_hz"] = pipeline.options().controller.frame_rate_hz;
   json["interrupted"] = g_interrupted.load();
   json["end_of_stream"] = end_of_stream;
   WriteFileAtomically(out / "summary.json", json.dump(2) + "\n");
@@ -311,6 +345,9 @@ void SetupRunCommand(CLI::App& app) {
   sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
   sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
   sub->add_flag("--real-time", o->source.real_time, "Throttle to the camera's frame rate");
+  sub->add_option("--fps", o->fps,
+                  "Frame rate the integration time must leave, Hz (0 = the camera's maximum, "
+                  "SR-2: 30); overrides the config's controller.frame_rate_hz");
   sub->add_flag("--print-config", o->print_config,
                 "Print every pipeline option (defaults, or --config's values) as YAML and exit");
   sub->callback([o] { RunRun(*o); });

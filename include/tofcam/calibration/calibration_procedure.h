@@ -89,6 +89,10 @@ struct WallCalibrationOptions {
 struct WallCalibrationReport {
   int exposure_frames = 0;       ///< Frames the controller needed to settle.
   int integration_register = 0;  ///< Register used for the averaged frames.
+  /// +1 when the exposure controller ended at the camera's (or its own) largest register, -1 at
+  /// the smallest, 0 otherwise: at a bound the wall was too dark (or too bright) for its set
+  /// point and the calibration was taken at a clipped exposure. Always 0 for the Fixed kind.
+  int exposure_at_bound = 0;
   int warmup_frames = 0;         ///< Frames discarded while the drift settled (incl. the window).
   double drift_m_per_s = 0.0;    ///< Drift rate at the end of the warm-up, m/s.
   int uncalibrated_pixels = 0;
