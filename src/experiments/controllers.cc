@@ -42,6 +42,8 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
                                 Sim(o, 199, 0));
     IntegrationSweepOptions so;
     so.steps = Scaled(32, o.effort, 8);
+    // Exposures that keep the camera's frame rate (the pipeline bounds every controller so).
+    so.to_register = MaxRegisterForFrameRate(camera.Info(), camera.Info().max_frame_rate_hz);
     const std::vector<IntegrationSweepPoint> points = SweepIntegrationTime(camera, so);
     sweep_setpoint = ChooseSetpoint(points);
   }
@@ -57,9 +59,21 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     settings.push_back({label, c});
   };
   const ControllerOptions defaults;
-  add("may-proportional (defaults)", ControllerKind::kMayProportional, defaults.bias_register);
+  add("may-proportional (scheduled V_p)", ControllerKind::kMayProportional,
+      defaults.bias_register);
+  {
+    // The library's defaults before issue 13: a fixed V_p that a dim scene barely feels.
+    ControllerOptions old = defaults;
+    old.kind = ControllerKind::kMayProportional;
+    old.gain_register_per_intensity = 2.5e-4;
+    settings.push_back({"may-proportional (V_p 2.5e-4, the old defaults)", old});
+    // A fixed V_p large enough to move the hall: it limit-cycles on the hand.
+    old.gain_register_per_intensity = 0.012;
+    settings.push_back({"may-proportional (V_p 0.012)", old});
+  }
   settings.push_back({"may-proportional (sweep set point)", sweep_setpoint.Apply(defaults)});
-  add("may-incremental", ControllerKind::kMayIncremental, defaults.bias_register);
+  add("may-incremental (scheduled V_p, the default)", ControllerKind::kMayIncremental,
+      defaults.bias_register);
   add("vendor-histogram", ControllerKind::kVendorHistogram, defaults.bias_register);
   add("fixed-20", ControllerKind::kFixed, 20);
   add("fixed-80", ControllerKind::kFixed, 80);
@@ -71,12 +85,14 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
   Table summary{"controllers_summary",
                 {"controller", "I_A / c_0 / V_p", "registers used (min-max)",
                  "settle frames after steps (3.0/4.5/5.0/7.0/8.0 s)", "steady-state |Ī-I_A|/I_A",
-                 "frames with saturation", "mean valid %", "mean RMSE"},
+                 "same, where I_A is in reach", "register reversals > 2", "frames with saturation",
+                 "mean valid %", "mean RMSE"},
                 {},
                 true};
   struct Outcome {
     std::string label;
-    double steady = 0, valid = 0, rmse = 0;
+    double steady = 0, steady_reachable = 0, valid = 0, rmse = 0;
+    int reversals = 0;
     long long saturated_frames = 0, frames = 0;
     int reg_min = 0, reg_max = 0;
   };
@@ -119,9 +135,10 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     // Settling after each step: frames until the register stays within max(2, 5 %) of the
     // median of the segment's last 10 frames for the rest of the segment.
     std::string settle_text;
-    double steady_sum = 0;
-    int steady_n = 0;
+    double steady_sum = 0, reachable_sum = 0;
+    int steady_n = 0, reachable_n = 0;
     const double target = popts.controller.target_intensity;
+    const ControllerOptions& bounds = pipeline.options().controller;
     for (std::size_t k = 1; k < steps.size(); ++k) {
       const double end = k + 1 < steps.size() ? steps[k + 1] : duration_s;
       std::vector<std::size_t> seg;
@@ -136,8 +153,16 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
       std::vector<double> last;
       for (std::size_t j = seg.size() - tail; j < seg.size(); ++j) {
         last.push_back(regs[seg[j]]);
-        steady_sum += std::abs(intensities[seg[j]] - target) / target;
+        const double error = std::abs(intensities[seg[j]] - target) / target;
+        steady_sum += error;
         ++steady_n;
+        // At a bound with Ī on the far side of I_A, no register reaches it: not the law's fault.
+        const bool pinned = (regs[seg[j]] >= bounds.max_register && intensities[seg[j]] < target) ||
+                            (regs[seg[j]] <= bounds.min_register && intensities[seg[j]] > target);
+        if (!pinned) {
+          reachable_sum += error;
+          ++reachable_n;
+        }
       }
       std::nth_element(last.begin(), last.begin() + last.size() / 2, last.end());
       const double final_reg = last[last.size() / 2];
@@ -155,6 +180,16 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     out.valid = valid_sum / static_cast<double>(out.frames);
     out.rmse = rmse_n ? std::sqrt(rmse_sq / rmse_n) : kNaN;
     out.steady = steady_n ? steady_sum / steady_n : kNaN;
+    out.steady_reachable = reachable_n ? reachable_sum / reachable_n : kNaN;
+    // Oscillation: the register changes direction by more than 2 registers each way.
+    int direction = 0;
+    for (std::size_t j = 1; j < regs.size(); ++j) {
+      const double step = regs[j] - regs[j - 1];
+      if (std::abs(step) <= 2.0) continue;
+      const int now = step > 0 ? 1 : -1;
+      if (direction != 0 && now != direction) ++out.reversals;
+      direction = now;
+    }
     out.saturated_frames = saturated_frames;
     out.reg_min = static_cast<int>(*std::min_element(regs.begin(), regs.end()));
     out.reg_max = static_cast<int>(*std::max_element(regs.begin(), regs.end()));
@@ -168,11 +203,14 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
              : (c.kind == ControllerKind::kFixed ? "- / " + I(c.bias_register) + " / -"
                                                  : "SR-3000 histogram"),
          I(out.reg_min) + "-" + I(out.reg_max), settle_text, F(out.steady, 3),
-         I(saturated_frames) + " of " + I(out.frames), Pct(out.valid), Mm(out.rmse)});
+         F(out.steady_reachable, 3), I(out.reversals), I(saturated_frames) + " of " + I(out.frames),
+         Pct(out.valid), Mm(out.rmse)});
     r.metrics[setting.label + ".mean_valid"] = out.valid;
     r.metrics[setting.label + ".mean_rmse"] = out.rmse;
     r.metrics[setting.label + ".saturated_frames"] = static_cast<double>(saturated_frames);
     r.metrics[setting.label + ".steady_state_error"] = out.steady;
+    r.metrics[setting.label + ".steady_state_error_in_reach"] = out.steady_reachable;
+    r.metrics[setting.label + ".reversals"] = out.reversals;
     r.metrics[setting.label + ".register_min"] = out.reg_min;
     r.metrics[setting.label + ".register_max"] = out.reg_max;
     outcomes.push_back(out);
@@ -182,62 +220,67 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
   r.tables.push_back(per_frame);
   r.tables.push_back(summary);
   r.plots = {"controllers"};
-  std::ostringstream text;
-  text << "`approach` scene (robot drives 6 m to 0.5 m towards a wall in 8 s, a hand near the "
-          "lens 3-5 s, lamps on 5-7 s), "
-       << F(duration_s, 3)
-       << " s, pipeline defaults (calibrated, accuracy filter 0.07 m). Controllers: the paper's "
-          "P-law as printed with the library's defaults (I_A = "
-       << F(defaults.target_intensity, 5)
-       << ", V_p = " << F(defaults.gain_register_per_intensity, 3)
-       << ", c_0 = " << defaults.bias_register
-       << ") and with the set point from a sweep (`SweepIntegrationTime` of the sequence's "
-          "first view, frozen at t = 0, then `ChooseSetpoint`: amplitude maximum at register "
-       << sweep_setpoint.amplitude_max_register << " with mean intensity "
-       << F(sweep_setpoint.amplitude_max_intensity, 5)
-       << "), the incremental form and the vendor histogram (SR-3000 settings) with the "
-          "defaults, and two fixed exposures. Settle frames: frames after the step until the "
-          "register stays within max(2, 5 %) of its final value in that segment (0 = no "
-          "visible transient, not necessarily tracking). Steady-state error: mean |Ī - I_A| / "
-          "I_A over the last 10 frames of each segment, against each controller's own I_A "
-          "(the vendor histogram and the fixed exposures against the default I_A). RMSE: kept "
-          "pixels against the truth, pooled.\n\n";
   const auto find = [&](const std::string& label) -> const Outcome& {
     for (const Outcome& out : outcomes) {
       if (out.label == label) return out;
     }
     throw Error(ErrorCode::kInternal, "no controller " + label);
   };
-  const Outcome& pd = find("may-proportional (defaults)");
-  const Outcome& ps = find("may-proportional (sweep set point)");
-  const Outcome& inc = find("may-incremental");
-  text << "- The printed P-law with the defaults uses registers " << pd.reg_min << "-"
-       << pd.reg_max;
-  if (pd.reg_max - pd.reg_min <= 10) {
-    text << ": it hardly leaves c_0 (V_p D_t is small for this scene's intensities) and behaves "
-            "almost like a fixed exposure";
+  std::string find_bound;
+  {
+    sim::SimulatedCamera probe(sim::LoadBuiltinScene("approach"), s.model, Sim(o, 198, 0));
+    find_bound = "1.." + I(MaxRegisterForFrameRate(probe.Info(), probe.Info().max_frame_rate_hz));
   }
-  text << "; its steady-state error is " << F(pd.steady, 3) << " against " << F(inc.steady, 3)
-       << " for the incremental form with the same I_A"
-       << (pd.steady > inc.steady ? " (the offset of the position form)" : "") << ".\n";
+  std::ostringstream text;
+  text << "`approach` scene (robot drives 6 m to 0.5 m towards a wall in 8 s, a hand near the "
+          "lens 3-5 s, lamps on 5-7 s), "
+       << F(duration_s, 3)
+       << " s, pipeline defaults (calibrated, accuracy filter 0.07 m) at the camera's 30 frames/s "
+          "(every controller's registers are bounded to "
+       << find_bound << ", integration + readout within 1/30 s). Controllers: the paper's P-law "
+          "as printed with a scheduled V_p (the library's default gain since issue 13), with "
+          "the old fixed default V_p = 2.5e-4 and with V_p = 0.012, and with the set point "
+          "from a sweep (`SweepIntegrationTime` of the sequence's first view within the "
+          "30-frames/s registers, frozen at t = 0, then `ChooseSetpoint`: amplitude maximum at "
+          "register "
+       << sweep_setpoint.amplitude_max_register << " with mean intensity "
+       << F(sweep_setpoint.amplitude_max_intensity, 5)
+       << "); the incremental form with the scheduled V_p (the library's default controller); "
+          "the vendor histogram (SR-3000 settings); two fixed exposures. Settle frames: frames "
+          "after the step until the register stays within max(2, 5 %) of its final value in "
+          "that segment (0 = no visible transient, not necessarily tracking). Steady-state "
+          "error: mean |Ī - I_A| / I_A over the last 10 frames of each segment, against each "
+          "controller's own I_A (the vendor histogram and the fixed exposures against the "
+          "default I_A); \"in reach\" leaves out frames at a register bound with Ī on the far "
+          "side of I_A (no register reaches it: the dim start of the sequence). Reversals: "
+          "changes of direction of the register by more than 2 registers (oscillation). RMSE: "
+          "kept pixels against the truth, pooled.\n\n";
+  const Outcome& old = find("may-proportional (V_p 2.5e-4, the old defaults)");
+  const Outcome& hot = find("may-proportional (V_p 0.012)");
+  const Outcome& ps = find("may-proportional (sweep set point)");
+  const Outcome& inc = find("may-incremental (scheduled V_p, the default)");
+  text << "- The old defaults (printed law, V_p = 2.5e-4, c_0 = 40) use registers " << old.reg_min
+       << "-" << old.reg_max << ": V_p D_t is a few registers at most for this scene, so the "
+          "law hardly leaves c_0 (steady-state error in reach "
+       << F(old.steady_reachable, 3) << "). A V_p large enough to move the dim start (0.012) "
+          "swings with "
+       << hot.reversals << " reversals over registers " << hot.reg_min << "-" << hot.reg_max
+       << ": the loop gain V_p dĪ/dc is far above 1 once the hand is in. No fixed V_p serves "
+          "both: dĪ/dc spans three orders of magnitude between the dim hall and the hand.\n";
+  text << "- The default controller (incremental law, V_p,t = 0.5 c_t / Ī_t) has a steady-state "
+          "error in reach of "
+       << F(inc.steady_reachable, 3) << " with " << inc.reversals
+       << " reversals and registers " << inc.reg_min << "-" << inc.reg_max
+       << ": the scheduled gain keeps the loop gain at 0.5 in every segment.\n";
   text << "- With the sweep's set point (I_A = " << F(sweep_setpoint.target_intensity, 5)
        << ", c_0 = " << sweep_setpoint.bias_register
        << ", V_p = " << F(sweep_setpoint.gain_register_per_intensity, 3)
        << ") the printed law uses registers " << ps.reg_min << "-" << ps.reg_max
        << ", steady-state error " << F(ps.steady, 3) << ", saturation in " << ps.saturated_frames
-       << " of " << ps.frames << " frames, " << Pct(ps.valid) << " valid pixels";
-  text << (ps.steady < pd.steady ? ": closer to its set point than with the defaults" : "");
-  if (sweep_setpoint.amplitude_max_register >= defaults.max_register) {
-    text << ". The first view (the wall 6 m away, nothing near) does not saturate within the "
-            "register range, so the mean amplitude still rises at the longest exposure and the "
-            "sweep puts I_A just below the intensity there; as the robot approaches the wall the "
-            "scene brightens many times over and that I_A no longer fits (steady-state error "
-         << F(ps.steady, 3)
-         << "). The paper chose I_A on the scene it worked in and assumes successive frames are "
-            "similar; a set point from one static view does not carry over to a sequence whose "
-            "brightness changes this much";
-  }
-  text << ".\n";
+       << " of " << ps.frames << " frames, " << Pct(ps.valid)
+       << " valid pixels. The paper chose I_A on the scene it worked in and assumes successive "
+          "frames are similar; a set point from one static view does not carry over to a "
+          "sequence whose brightness changes this much.\n";
   const auto best = [&](auto better) {
     const Outcome* b = &outcomes.front();
     for (const Outcome& out : outcomes) {

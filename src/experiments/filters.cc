@@ -229,6 +229,9 @@ ExperimentResult Filters(const ExperimentOptions& o) {
     r.metrics[row.name + "[" + row.parameter + "].recall"] = rc;
     r.metrics[row.name + "[" + row.parameter + "].f1"] = f1_safe;
     r.metrics[row.name + "[" + row.parameter + "].ms"] = 1e3 * c.seconds / c.frames;
+    r.metrics[row.name + "[" + row.parameter + "].kept_fraction"] = Ratio(c.kept_n, measured);
+    // The population is the same for every row: the precision of a filter that flags at random.
+    r.metrics["bad_fraction"] = Ratio(c.bad, measured);
   }
   Table summary{"filters_best",
                 {"filter", "best parameter (F1, 5 cm)", "precision", "recall", "F1", "precision 3σ",

@@ -41,10 +41,10 @@ TEST(ExperimentsTest, Fig3AmplitudeHasAMaximumAfterSaturationStarts) {
   EXPECT_GT(r.metrics.at("intensity_last"), 2.0 * r.metrics.at("intensity_at_amplitude_max"));
   // Saturation must begin before (or at) the amplitude maximum: that is what bends it down.
   EXPECT_LE(r.metrics.at("saturation_onset_register"), peak);
-  // Section III-A: I_A, a small interval below the intensity at the amplitude maximum, lies in
-  // the paper's working band 15000-18000 (issue 3's tuning target for the pavilion).
-  EXPECT_GE(r.metrics.at("target_intensity"), 15000.0);
-  EXPECT_LE(r.metrics.at("target_intensity"), 18000.0);
+  // Section III-A: I_A lies a small interval below the intensity at the amplitude maximum.
+  // (That it also lands in the paper's 15000-18000 band is the simulator's tuning target, issue
+  // 3: the LED power was chosen for it. Agreement by construction, not tested as a result.)
+  EXPECT_LT(r.metrics.at("target_intensity"), r.metrics.at("intensity_at_amplitude_max"));
 }
 
 TEST(ExperimentsTest, Fig5NearObjectsMoveTheAmplitudeMaximumToShorterTimes) {
@@ -55,20 +55,28 @@ TEST(ExperimentsTest, Fig5NearObjectsMoveTheAmplitudeMaximumToShorterTimes) {
 }
 
 TEST(ExperimentsTest, Fig67PassingPixelsGrowWithIntegrationTimeUpToTheOptimum) {
-  const ExperimentResult r = RunExperiment("fig6-7", Small());
-  for (const std::string scene : {"oversaturated", "non-saturated"}) {
-    SCOPED_TRACE(scene);
-    // Paper section III-B: longer exposure lowers ΔL, so more pixels pass a fixed threshold
-    // until saturation removes them. Every coarse step up to the optimum must rise.
-    EXPECT_EQ(r.metrics.at(scene + ".passing_rise_fraction"), 1.0);
-    // The optimum is not at the shortest exposure and lies near the amplitude maximum (beyond
-    // it the saturating pixels are lost), within one coarse register step (20 at effort 0.25).
-    EXPECT_GT(r.metrics.at(scene + ".max_passing_register"), 1.0);
-    EXPECT_NEAR(r.metrics.at(scene + ".max_passing_register"),
-                r.metrics.at(scene + ".amplitude_max_register"), 20.0);
+  // What holds for every seed of a set, not one lucky run.
+  for (const std::uint64_t seed : {7u, 8u, 9u}) {
+    ExperimentOptions o = Small();
+    o.seed = seed;
+    const ExperimentResult r = RunExperiment("fig6-7", o);
+    for (const std::string scene : {"oversaturated", "non-saturated"}) {
+      SCOPED_TRACE(scene + " seed " + std::to_string(seed));
+      // Paper section III-B: longer exposure lowers ΔL, so more pixels pass a fixed threshold
+      // until saturation removes them. Nine steps in ten up to the optimum must rise: near the
+      // optimum the expected gain of a step is smaller than the frame-to-frame noise of a count of
+      // thousands of pixels (a few tens), so an occasional step may dip (at full effort 50 of 51
+      // steps rise).
+      EXPECT_GE(r.metrics.at(scene + ".passing_rise_fraction"), 0.9);
+      // The optimum is not at the shortest exposure and lies near the amplitude maximum (beyond
+      // it the saturating pixels are lost), within one coarse register step (20 at effort 0.25).
+      EXPECT_GT(r.metrics.at(scene + ".max_passing_register"), 1.0);
+      EXPECT_NEAR(r.metrics.at(scene + ".max_passing_register"),
+                  r.metrics.at(scene + ".amplitude_max_register"), 20.0);
+    }
+    // Fig. 7: without near objects nothing saturates, so the count grows to the longest exposure.
+    EXPECT_GE(r.metrics.at("non-saturated.max_passing_register"), 235.0);
   }
-  // Fig. 7: without near objects nothing saturates, so the count grows to the longest exposure.
-  EXPECT_GE(r.metrics.at("non-saturated.max_passing_register"), 235.0);
 }
 
 TEST(ExperimentsTest, Fig1011LampsRaiseDeltaLAndTheFilterRemovesTheCorruptedPixels) {
@@ -76,9 +84,11 @@ TEST(ExperimentsTest, Fig1011LampsRaiseDeltaLAndTheFilterRemovesTheCorruptedPixe
   // Lamps add offset without amplitude: eq. 2 predicts a larger ΔL (paper fig. 10).
   EXPECT_GT(r.metrics.at("on.mean_delta_l"), 1.3 * r.metrics.at("off.mean_delta_l"));
   EXPECT_GT(r.metrics.at("on.bad_pixels"), r.metrics.at("off.bad_pixels"));
-  // Paper fig. 11: "the noisy area was filtered out completely": the filter (ΔL from the
-  // registers) removes nearly all pixels whose true σ (closed form) the lamps doubled and pushed
-  // past the threshold, and keeps nearly all pixels that stay precise (true σ < half of it).
+  // Paper fig. 11: "the noisy area was filtered out completely". The noisy area is measured (the
+  // lamps at least double a pixel's RMS error against the truth over the frames and push it past
+  // 1.5 x the threshold), not the simulator's closed-form σ, which is eq. 2's own model: the
+  // filter (ΔL from one frame's registers) must remove nearly all of it and keep nearly all
+  // pixels whose measured RMS error stays below half the threshold.
   EXPECT_GT(r.metrics.at("on.noisy_area_pixels"), 100.0);
   EXPECT_GT(r.metrics.at("on.noisy_area_removed"), 0.9);
   EXPECT_GT(r.metrics.at("on.precise_kept"), 0.95);
@@ -87,10 +97,11 @@ TEST(ExperimentsTest, Fig1011LampsRaiseDeltaLAndTheFilterRemovesTheCorruptedPixe
 
 TEST(ExperimentsTest, Fig2DecomposesSaturationBloomingScatteringAndShotNoise) {
   const ExperimentResult r = RunExperiment("fig2", Small());
-  // Paper fig. 2: 15 ms is "definitely too high" for the hand (it saturates), 4 ms fits (it does
-  // not). A hand's worth of pixels, not a few glints: the hand covers thousands of pixels.
-  EXPECT_GT(r.metrics.at("saturated_15ms"), 1000.0);
-  EXPECT_EQ(r.metrics.at("saturated_4ms"), 0.0);
+  // Paper fig. 2: 15 ms is "definitely too high" for the hand, 4 ms fits. Charge grows
+  // linearly with T, so at 15 ms (3.7 x 4.08 ms) more pixels clip. (That the hand clips
+  // thousands of pixels at 15 ms and none at 4 ms is the simulator's tuning target, issue 3: the
+  // LED power and the wall distance were chosen for it. Not tested as a result.)
+  EXPECT_GT(r.metrics.at("saturated_15ms"), r.metrics.at("saturated_4ms"));
   // Scattering is linear optics: the scattered and the direct light both scale with T, so the
   // noise-free bias map is the same at both exposures. 2 mm allows for the 0.11 mm distance
   // register step and the wiggling evaluated at a (identical) phase; a real dependence would be
@@ -127,9 +138,13 @@ TEST(ExperimentsTest, Fig89FilterRemovesTheStronglyBiasedHaloAndKeepsUnbiasedPix
   EXPECT_GT(r.metrics.at("r59.over20_pixels"), 100.0);
   EXPECT_GT(r.metrics.at("r59.over20_removed"), 0.5);
   EXPECT_GT(r.metrics.at("r59.unbiased_kept"), 0.95);
-  // The paper's own setting (the pavilion with a hand at the bottom): the halo goes as well.
-  EXPECT_GT(r.metrics.at("pavilion.over20_pixels"), 10.0);
-  EXPECT_GT(r.metrics.at("pavilion.over20_removed"), 0.8);
+  // ... and the hand is why: the same pixels with the hand taken out of the scene are removed
+  // far less often. At least a quarter of the halo is removed because of the halo (measured:
+  // 79 % against 29 % at full effort). In the paper's own setting (the pavilion with a hand)
+  // the halo pixels are the dim far hall, removed with or without the hand (100 % both): no
+  // evidence either way, so not asserted (docs/results.md says so).
+  EXPECT_GT(r.metrics.at("r59.over20_removed") - r.metrics.at("r59.over20_removed_without_hand"),
+            0.25);
   // Phasor geometry of the background-distance sweep (wall pixels only). The scattered phasor s
   // of the hand (phase ~10°) adds to the wall's a (phase 2π d/L); the wall's signal falls as
   // 1/d², so ρ = s/a grows as d².
@@ -223,17 +238,94 @@ TEST(ExperimentsTest, PreambleQuotesTheMeasuredNumbers) {
   EXPECT_EQ(md.find("lamps"), std::string::npos) << md;
 }
 
-TEST(ExperimentsTest, CalibrationReducesTheHeldOutError) {
+TEST(ExperimentsTest, CalibrationReducesTheHeldOutErrorToTheNoiseFloor) {
   const ExperimentResult r = RunExperiment("calibration", Small());
-  EXPECT_LT(r.metrics.at("held_out_rms_after"), r.metrics.at("held_out_rms_before"));
+  const double after = r.metrics.at("held_out_rms_after");
+  const double floor = r.metrics.at("held_out_noise_floor");
+  // The distance correction removes the wiggling (±30 mm) down to the noise of the averaged
+  // frames: what is left above that floor in quadrature is smaller than the floor itself
+  // (after < 1.5 x floor; measured 1.1 x at full effort, 1.4 x at this effort's fewer frames).
+  // A fall back to the offsets alone (31 mm against a 4-7 mm floor) fails this.
+  EXPECT_LT(after, 1.5 * floor);
+  EXPECT_GT(r.metrics.at("held_out_rms_before"), 2.5 * after);
 }
 
 TEST(ExperimentsTest, RealDataDeltaLRanksTheMeasuredNoise) {
   const ExperimentResult r = RunExperiment("real-data", Small());
-  // Eq. 2 must order the pixels by their temporal noise: a clearly positive rank correlation
-  // (3-frame σ estimates are noisy, so not close to 1).
-  EXPECT_GT(r.metrics.at("spearman"), 0.3);
+  // Eq. 2 must order the pixels by their temporal noise. The file is fixed, so the value is too
+  // (0.784); 3-frame σ estimates are noisy (relative error ~50 %), which caps how close to 1 it
+  // can get. 0.7: a swapped or misscaled amplitude channel drops it below 0.5.
+  EXPECT_GT(r.metrics.at("spearman"), 0.7);
   EXPECT_GT(r.metrics.at("scale"), 0.0);
+}
+
+TEST(ExperimentsTest, ControllersDefaultHoldsTheSetPointTheOldDefaultsDidNot) {
+  ExperimentOptions o = Small();
+  o.effort = 0.5;  // 5 s of the approach: the hand enters at 3 s
+  const ExperimentResult r = RunExperiment("controllers", o);
+  const auto m = [&](const std::string& label, const std::string& key) {
+    return r.metrics.at(label + "." + key);
+  };
+  const std::string old = "may-proportional (V_p 2.5e-4, the old defaults)";
+  const std::string hot = "may-proportional (V_p 0.012)";
+  const std::string inc = "may-incremental (scheduled V_p, the default)";
+  // The printed law with V_p = 2.5e-4 and c_0 = 40 can only reach c_0 - V_p (65532 - 16000) =
+  // 27.6 to c_0 + V_p 16000 = 44 (hand-computed from the law and the register range).
+  EXPECT_GE(m(old, "register_min"), 27.0);
+  EXPECT_LE(m(old, "register_max"), 44.0);
+  // V_p = 0.012 against the hand's dĪ/dc of thousands per register: loop gain >> 2, the
+  // register swings between its bounds.
+  EXPECT_GT(m(hot, "reversals"), 10.0);
+  // The default: within 10 % of I_A wherever it is in reach (one register is 1-3 % of Ī at the
+  // registers used; the scene moves throughout), without swinging.
+  EXPECT_LT(m(inc, "steady_state_error_in_reach"), 0.1);
+  EXPECT_LT(m(old, "steady_state_error_in_reach"), 1.0);
+  EXPECT_GT(m(old, "steady_state_error_in_reach"), 3.0 * m(inc, "steady_state_error_in_reach"));
+  EXPECT_LE(m(inc, "reversals"), 5.0);
+  // Every controller stays within the 30-frames/s registers.
+  for (const auto& [key, value] : r.metrics) {
+    if (key.size() > 13 && key.substr(key.size() - 13) == ".register_max") {
+      EXPECT_LE(value, 115.0) << key;
+    }
+  }
+}
+
+TEST(ExperimentsTest, FiltersBeatChanceAndAThresholdRejectsASupersetAsItFalls) {
+  const ExperimentResult r = RunExperiment("filters", Small());
+  const double chance = r.metrics.at("bad_fraction");
+  ASSERT_GT(chance, 0.0);
+  ASSERT_LT(chance, 1.0);
+  // A filter that flags at random has precision = the bad fraction; every filter's best setting
+  // must do better (it removes bad pixels more often than good ones).
+  int filters = 0;
+  for (const auto& [key, value] : r.metrics) {
+    if (key.size() > 8 && key.substr(key.size() - 8) == ".best_f1") {
+      ++filters;
+      EXPECT_GT(value, 0.0) << key;
+    }
+    if (key.size() > 10 && key.substr(key.size() - 10) == ".precision" && std::isfinite(value)) {
+      EXPECT_GT(value, chance) << key;
+    }
+  }
+  EXPECT_GE(filters, 6);
+  // The accuracy threshold: a smaller ΔL limit flags a superset, so recall can only rise and the
+  // kept fraction only fall as it shrinks (exact, whatever the simulator).
+  std::vector<std::pair<double, std::string>> thresholds;
+  for (const auto& [key, value] : r.metrics) {
+    if (key.rfind("accuracy[", 0) == 0 && key.size() > 7 &&
+        key.substr(key.size() - 7) == ".recall") {
+      thresholds.emplace_back(std::stod(key.substr(9, key.find(']') - 9)),
+                              key.substr(0, key.find(']') + 1));
+    }
+  }
+  ASSERT_GE(thresholds.size(), 3u);
+  std::sort(thresholds.begin(), thresholds.end());
+  for (std::size_t k = 1; k < thresholds.size(); ++k) {
+    const std::string& lo = thresholds[k - 1].second;
+    const std::string& hi = thresholds[k].second;
+    EXPECT_GE(r.metrics.at(lo + ".recall"), r.metrics.at(hi + ".recall")) << lo << " " << hi;
+    EXPECT_LE(r.metrics.at(lo + ".kept_fraction"), r.metrics.at(hi + ".kept_fraction"));
+  }
 }
 
 TEST(ExperimentsTest, WritesCsvAndMarkdown) {
