@@ -36,6 +36,8 @@
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 #include "tofcam/filters/filter_set.h"
+#include "tofcam/filters/spatial_filter.h"
+#include "tofcam/filters/temporal_filter.h"
 #include "tofcam/io/recording.h"
 #include "tofcam/pan/pan_view.h"
 #include "tofcam/pipeline/metric_conversion.h"
@@ -134,6 +136,9 @@ struct Workspace {
   MetricFrame metric;
   Image<float> delta_l;
   Image<PixelFlags> raised;  // filter output, reused (ApplyFiltersInto)
+  Image<float> smoothed;     // SpatialFilterInto output
+  MetricFrame temporal_frame;
+  std::optional<TemporalFilter> temporal;
   PointCloud cloud;
   std::optional<PaperChain> paper_chain;
   std::optional<PaperChain> paper_chain_eq1;  // the paper's calibration alone (no table)
@@ -178,7 +183,12 @@ void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
     f.info.pan_angle_rad = (-60.0 + 30.0 * k) * kPi / 180.0;
     ws.pan_frames.push_back(std::move(f));
   }
-  ws.controller = MakeController({});
+  ControllerOptions paper_law;
+  paper_law.kind = ControllerKind::kMayProportional;
+  paper_law.gain_register_per_intensity = 2.5e-4;
+  ws.controller = MakeController(paper_law);
+  ws.temporal_frame = in.ready.front();
+  ws.temporal.emplace();
   PaperChainOptions pc;
   pc.calibration = in.calibration;
   pc.accuracy = in.accuracy;
@@ -250,6 +260,29 @@ std::vector<Stage> MakeStages() {
                [all](Workspace& ws, std::size_t i) {
                  ApplyFiltersInto(ws.ready[i % ws.ready.size()], ws.input->rays, all, ws.raised);
                  Sink(ws, ws.raised.data());
+               }});
+  // Smoothing (not in the paper): distance + flags (+ ΔL) in, distance out.
+  for (const SpatialFilterKind kind : {SpatialFilterKind::kMedian, SpatialFilterKind::kBilateral}) {
+    SpatialFilterOptions so;
+    so.kind = kind;
+    s.push_back({std::string("smoothing: ") + std::string(SpatialFilterKindName(kind)) + " 3x3",
+                 kind == SpatialFilterKind::kMedian ? 10.0 : 14.0, 1, true,
+                 [so](Workspace& ws, std::size_t i) {
+                   SpatialFilterInto(ws.ready[i % ws.ready.size()], so, ws.smoothed);
+                   Sink(ws, ws.smoothed.data());
+                 }});
+  }
+  // Temporal filter: distance (restored from the ready frame: 4 + 4), ΔL and flags in, distance
+  // and the per-pixel state (mean 4, variance 4, count 2, gap, outlier, drift 1 each) both ways.
+  s.push_back({"temporal filter", 4 + 4 + 4 + 2 + 4 + 2 * 13, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 const MetricFrame& in = ws.ready[i % ws.ready.size()];
+                 MetricFrame& m = ws.temporal_frame;
+                 std::copy(in.radial_distance_m.data(),
+                           in.radial_distance_m.data() + in.radial_distance_m.size(),
+                           m.radial_distance_m.data());
+                 ws.temporal->Process(m);
+                 Sink(ws, m.radial_distance_m.data());
                }});
   s.push_back(
       {"point cloud", 4 + 4 + 4 + 4 + 2 + 12 + 24 + 2, 1, true, [](Workspace& ws, std::size_t i) {

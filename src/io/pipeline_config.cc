@@ -93,6 +93,29 @@ void VisitOptions(V& v, PipelineOptions& o) {
       v.Field("min_points", o.filters.weingarten.min_points, "[1, 1000000]");
     });
   });
+  v.Section("smoothing", "edge-preserving spatial smoothing of kept distances (not in the paper)",
+            [&] {
+              v.Field("enabled", o.smoothing_enabled, "");
+              v.Field("kind", o.smoothing.kind, "median or bilateral (weighted by ΔL)");
+              v.Field("radius_px", o.smoothing.radius_px, "window half-size, [1, 3]");
+              v.Field("max_jump_m", o.smoothing.max_jump_m,
+                      "m, >= 0: support within this of the centre; 0 = no limit");
+              v.Field("min_support", o.smoothing.min_support, "pixels incl. the centre, [1, 49]");
+              v.Field("range_sigma_factor", o.smoothing.range_sigma_factor,
+                      "bilateral: range weight width in σ, (0, 100]");
+              v.Field("fallback_sigma_m", o.smoothing.fallback_sigma_m,
+                      "bilateral: σ where ΔL is missing, m, > 0");
+            });
+  v.Section("temporal", "per-pixel average over frames, weighted by ΔL, reset on motion", [&] {
+    v.Field("enabled", o.temporal_enabled, "");
+    v.Field("reset_sigma", o.temporal.reset_sigma, "motion test in σ, (0, 100]");
+    v.Field("drift_sigma", o.temporal.drift_sigma, "drift test in σ, (0, reset_sigma]");
+    v.Field("drift_frames", o.temporal.drift_frames, "frames of one-signed drift, [2, 100]");
+    v.Field("max_frames", o.temporal.max_frames, "longest effective average, [1, 10000]");
+    v.Field("max_gap_frames", o.temporal.max_gap_frames,
+            "rejected frames before a pixel is forgotten, [0, 255]");
+    v.Field("fallback_sigma_m", o.temporal.fallback_sigma_m, "σ where ΔL is missing, m, > 0");
+  });
   v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");
     v.Field("kind", o.controller.kind,
@@ -202,6 +225,9 @@ class Writer {
   }
   void Field(const char* key, ControllerKind& value, const char* doc) {
     Scalar(key, std::string(ControllerKindName(value)), doc);
+  }
+  void Field(const char* key, SpatialFilterKind& value, const char* doc) {
+    Scalar(key, std::string(SpatialFilterKindName(value)), doc);
   }
   template <typename T>
   void Field(const char* key, Measured<T> m, const char* doc) {
@@ -327,6 +353,16 @@ class Reader {
     if (!node.IsScalar()) Fail(node, TypeMessage(key, "a controller name", node));
     try {
       value = ParseControllerKind(node.Scalar());
+    } catch (const Error& e) {
+      Fail(node, "'" + Path(key) + "': " + e.what());
+    }
+  }
+  void Field(const char* key, SpatialFilterKind& value, const char* /*doc*/) {
+    const YAML::Node node = Lookup(key);
+    if (!node) return;
+    if (!node.IsScalar()) Fail(node, TypeMessage(key, "a filter kind", node));
+    try {
+      value = ParseSpatialFilterKind(node.Scalar());
     } catch (const Error& e) {
       Fail(node, "'" + Path(key) + "': " + e.what());
     }

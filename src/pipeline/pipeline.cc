@@ -32,6 +32,8 @@ void PipelineOptions::Validate() const {
     throw Error(ErrorCode::kInvalidArgument,
                 "filters.accuracy.enabled needs accuracy.enabled (the filter reads ΔL)");
   }
+  ValidateSection("smoothing", [&] { smoothing.Validate(); });
+  ValidateSection("temporal", [&] { temporal.Validate(); });
   ValidateSection("controller", [&] { controller.Validate(); });
   ValidateSection("false_color", [&] { color.Validate(); });
   ValidateSection("stats", [&] { stats.Validate(); });
@@ -84,6 +86,7 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
     c.bias_register = std::clamp(c.bias_register, lo, hi);
   }
   if (options_.controller_enabled) controller_ = MakeController(c);
+  if (options_.temporal_enabled) temporal_.emplace(options_.temporal);
 
   options_.stats.intensity_roi = c.roi;
   options_.stats.intensity_exclude_flags = c.exclude_flags;
@@ -106,6 +109,8 @@ void Pipeline::Process(const Frame& frame, PipelineResult& result) {
   const FilterSetOptions& filters = options_.filters;
   const bool neighbourhood =
       filters.flying_pixel_enabled || filters.jump_edge_enabled || filters.weingarten_enabled;
+  // Smoothing and the temporal filter change distances after the filters: the cloud follows.
+  const bool late_cloud = neighbourhood || options_.smoothing_enabled || temporal_.has_value();
   MetricFrame& m = result.frame;
   pipeline_internal::FusedStages s;
   s.metric = options_.metric;
@@ -115,7 +120,7 @@ void Pipeline::Process(const Frame& frame, PipelineResult& result) {
   s.accuracy = options_.accuracy_enabled ? &options_.accuracy : nullptr;
   s.filters = filters;
   s.rays = &rays_;
-  s.cloud = options_.cloud_enabled && !neighbourhood ? &options_.cloud : nullptr;
+  s.cloud = options_.cloud_enabled && !late_cloud ? &options_.cloud : nullptr;
   pipeline_internal::FusedOutputs out;
   out.frame = &m;
   out.input_flags = &result.input_flags;
@@ -127,7 +132,14 @@ void Pipeline::Process(const Frame& frame, PipelineResult& result) {
     // as rejected (as in ApplyFilters); they OR into the filter flags.
     filters_internal::NeighbourhoodFiltersInto(m, rays_, filters, result.filter_flags);
     MergeFlags(m, result.filter_flags);
-    if (options_.cloud_enabled) MakePointCloudInto(m, rays_, result.cloud, options_.cloud);
+  }
+  if (options_.smoothing_enabled) {
+    SpatialFilterInto(m, options_.smoothing, smoothed_);
+    std::swap(m.radial_distance_m, smoothed_);  // no allocation once both buffers exist
+  }
+  if (temporal_) temporal_->Process(m);
+  if (late_cloud && options_.cloud_enabled) {
+    MakePointCloudInto(m, rays_, result.cloud, options_.cloud);
   }
   if (!options_.cloud_enabled) result.cloud = PointCloud();
 
@@ -147,6 +159,10 @@ PipelineResult Pipeline::Process(const Frame& frame) {
 
 int Pipeline::InitialIntegrationRegister() const noexcept {
   return options_.controller.bias_register;
+}
+
+void Pipeline::ResetTemporal() {
+  if (temporal_) temporal_->Reset();
 }
 
 void Pipeline::ResetController(int reg) {

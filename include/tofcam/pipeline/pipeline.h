@@ -30,6 +30,8 @@
 #include "tofcam/core/frame.h"
 #include "tofcam/core/rgb.h"
 #include "tofcam/filters/filter_set.h"
+#include "tofcam/filters/spatial_filter.h"
+#include "tofcam/filters/temporal_filter.h"
 #include "tofcam/pipeline/frame_stats.h"
 #include "tofcam/pipeline/metric_conversion.h"
 
@@ -51,6 +53,16 @@ struct PipelineOptions {
   AccuracyOptions accuracy;
 
   FilterSetOptions filters;
+
+  /// Edge-preserving spatial smoothing of the kept pixels' distances after the filters (median
+  /// or ΔL-weighted bilateral, tofcam/filters/spatial_filter.h). Off by default: the paper has
+  /// none.
+  bool smoothing_enabled = false;
+  SpatialFilterOptions smoothing;
+  /// Per-pixel running average over frames, weighted by ΔL and reset on motion, after the
+  /// smoothing (tofcam/filters/temporal_filter.h). Off by default.
+  bool temporal_enabled = false;
+  TemporalFilterOptions temporal;
 
   /// Run the integration-time controller. Off: next_integration_register repeats the frame's.
   bool controller_enabled = true;
@@ -112,6 +124,8 @@ class Pipeline {
   [[nodiscard]] int InitialIntegrationRegister() const noexcept;
   /// Forgets the controller's history (e.g. after the pan unit moved), continuing at `reg`.
   void ResetController(int reg);
+  /// Forgets the temporal filter's per-pixel history (e.g. after the pan unit moved).
+  void ResetTemporal();
 
   /// False colour of the distances with only the input flags black (no filters).
   [[nodiscard]] Image<Rgb8> RenderRaw(const PipelineResult& result) const;
@@ -133,6 +147,8 @@ class Pipeline {
   RayTable rays_;
   std::optional<DenseDistanceCorrection> table_;  // the calibration's, resampled once
   std::unique_ptr<IntegrationTimeController> controller_;
+  std::optional<TemporalFilter> temporal_;
+  Image<float> smoothed_;  // the smoothing's output, swapped with the frame's distances
 };
 
 }  // namespace tofcam
