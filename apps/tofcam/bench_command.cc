@@ -274,16 +274,16 @@ std::vector<Stage> MakeStages() {
   }
   // Temporal filter: distance (restored from the ready frame: 4 + 4), ΔL and flags in, distance
   // and the per-pixel state (mean 4, variance 4, count 2, gap, outlier, drift 1 each) both ways.
-  s.push_back({"temporal filter", 4 + 4 + 4 + 2 + 4 + 2 * 13, 1, true,
-               [](Workspace& ws, std::size_t i) {
-                 const MetricFrame& in = ws.ready[i % ws.ready.size()];
-                 MetricFrame& m = ws.temporal_frame;
-                 std::copy(in.radial_distance_m.data(),
-                           in.radial_distance_m.data() + in.radial_distance_m.size(),
-                           m.radial_distance_m.data());
-                 ws.temporal->Process(m);
-                 Sink(ws, m.radial_distance_m.data());
-               }});
+  s.push_back(
+      {"temporal filter", 4 + 4 + 4 + 2 + 4 + 2 * 13, 1, true, [](Workspace& ws, std::size_t i) {
+         const MetricFrame& in = ws.ready[i % ws.ready.size()];
+         MetricFrame& m = ws.temporal_frame;
+         std::copy(in.radial_distance_m.data(),
+                   in.radial_distance_m.data() + in.radial_distance_m.size(),
+                   m.radial_distance_m.data());
+         ws.temporal->Process(m);
+         Sink(ws, m.radial_distance_m.data());
+       }});
   s.push_back(
       {"point cloud", 4 + 4 + 4 + 4 + 2 + 12 + 24 + 2, 1, true, [](Workspace& ws, std::size_t i) {
          MakePointCloudInto(ws.ready[i % ws.ready.size()], ws.input->rays, ws.cloud);

@@ -270,8 +270,8 @@ void RunCalibrate(const CalibrateOptions& o) {
                   "--controller fixed calibrates at a stated exposure: give it with "
                   "--integration-register N");
     }
-    wall.controller.max_register = std::max(wall.controller.max_register,
-                                            o.source.integration_time_register);
+    wall.controller.max_register =
+        std::max(wall.controller.max_register, o.source.integration_time_register);
     wall.controller.bias_register = o.source.integration_time_register;
   }
   SweepOptions sweep;
@@ -306,8 +306,8 @@ void RunCalibrate(const CalibrateOptions& o) {
                  "the wall is too %s for its set point and the offsets were measured at that "
                  "bound. State an exposure with --controller fixed --integration-register N, "
                  "or move the wall %s.\n",
-                 report.exposure_at_bound > 0 ? "largest" : "smallest",
-                 report.integration_register, report.exposure_at_bound > 0 ? "dark" : "bright",
+                 report.exposure_at_bound > 0 ? "largest" : "smallest", report.integration_register,
+                 report.exposure_at_bound > 0 ? "dark" : "bright",
                  report.exposure_at_bound > 0 ? "closer" : "further away");
   }
   std::printf(

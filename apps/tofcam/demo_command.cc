@@ -105,8 +105,9 @@ OffsetCalibration Calibrate(const DemoOptions& o, const sim::CameraModel& model,
           path.c_str(), cached.camera_model.c_str(), cached.width, cached.height,
           cached.wall_distance_m);
       if (cached.controller_setpoint && cached.controller_setpoint->bias_register > rate_register) {
-        std::printf("    its controller set point (c_0 %d) is beyond %.0f frames/s: measuring again\n",
-                    cached.controller_setpoint->bias_register, info.max_frame_rate_hz);
+        std::printf(
+            "    its controller set point (c_0 %d) is beyond %.0f frames/s: measuring again\n",
+            cached.controller_setpoint->bias_register, info.max_frame_rate_hz);
         cached.controller_setpoint.reset();
       }
       calibration = std::move(cached);
@@ -516,10 +517,9 @@ void RunDemo(const DemoOptions& o) {
   const double run_s = Seconds(run_start);
   // Camera time: frames per second of the simulated camera (its timestamps), which the
   // controller's registers allowed; the processing rate is what this machine managed.
-  const double camera_fps =
-      trace.size() > 1 ? static_cast<double>(trace.size() - 1) /
-                             (trace.back().time_s - trace.front().time_s)
-                       : std::numeric_limits<double>::quiet_NaN();
+  const double camera_fps = trace.size() > 1 ? static_cast<double>(trace.size() - 1) /
+                                                   (trace.back().time_s - trace.front().time_s)
+                                             : std::numeric_limits<double>::quiet_NaN();
   std::printf(
       "    %llu frames in %.1f s of camera time (%.1f frames/s; registers <= %d) and %.1f s "
       "of computing (%.1f frames/s incl. simulation): mean valid %.1f%%, mean dL %s, RMSE of "

@@ -457,7 +457,8 @@ OffsetCalibration CalibrateOffsets(Camera& camera, const WallCalibrationOptions&
   if (options.controller.kind != ControllerKind::kFixed) {
     const int hi = std::min(options.controller.max_register, info.max_integration_register);
     const int lo = std::max(options.controller.min_register, info.min_integration_register);
-    r.exposure_at_bound = r.integration_register >= hi ? 1 : (r.integration_register <= lo ? -1 : 0);
+    r.exposure_at_bound =
+        r.integration_register >= hi ? 1 : (r.integration_register <= lo ? -1 : 0);
   }
   std::tie(r.warmup_frames, r.drift_m_per_s) = WaitForWarmup(camera, options, progress);
   const PhasorAverage average = AverageFrames(camera, options.frames, "averaging", progress);

@@ -55,8 +55,7 @@ constexpr double kMaxScheduledFactor = 4.0;
 
 // The register the frame was taken with (the info's, else the controller's last output).
 double FrameRegister(const MetricFrame& frame, double fallback) {
-  return frame.info.integration_time_register > 0 ? frame.info.integration_time_register
-                                                  : fallback;
+  return frame.info.integration_time_register > 0 ? frame.info.integration_time_register : fallback;
 }
 
 // V_p,t * D_t of the scheduled gain: loop_gain * c_t * (1 - I_A / Ī_t), limited so that the
@@ -257,8 +256,8 @@ int MayProportional::Update(const MetricFrame& frame) {
       options_.gain_register_per_intensity > 0.0
           ? options_.gain_register_per_intensity * deviation
           : ScheduledCorrection(options_, mean, FrameRegister(frame, last_register_));
-  last_register_ = RoundClamp(options_.bias_register - correction, options_.min_register,
-                              options_.max_register);
+  last_register_ =
+      RoundClamp(options_.bias_register - correction, options_.min_register, options_.max_register);
   return last_register_;
 }
 
@@ -291,8 +290,8 @@ int MaxRegisterForFrameRate(const CameraInfo& camera, double frame_rate_hz) {
                     " ms");
   }
   if (camera.integration_time_step_us <= 0.0) return camera.max_integration_register;
-  const double reg = std::floor((budget_us - camera.integration_time_base_us) /
-                                camera.integration_time_step_us + 1e-9);
+  const double reg = std::floor(
+      (budget_us - camera.integration_time_base_us) / camera.integration_time_step_us + 1e-9);
   return static_cast<int>(std::clamp(reg, static_cast<double>(camera.min_integration_register),
                                      static_cast<double>(camera.max_integration_register)));
 }

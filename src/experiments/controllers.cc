@@ -59,8 +59,7 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     settings.push_back({label, c});
   };
   const ControllerOptions defaults;
-  add("may-proportional (scheduled V_p)", ControllerKind::kMayProportional,
-      defaults.bias_register);
+  add("may-proportional (scheduled V_p)", ControllerKind::kMayProportional, defaults.bias_register);
   {
     // The library's defaults before issue 13: a fixed V_p that a dim scene barely feels.
     ControllerOptions old = defaults;
@@ -237,7 +236,8 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
        << F(duration_s, 3)
        << " s, pipeline defaults (calibrated, accuracy filter 0.07 m) at the camera's 30 frames/s "
           "(every controller's registers are bounded to "
-       << find_bound << ", integration + readout within 1/30 s). Controllers: the paper's P-law "
+       << find_bound
+       << ", integration + readout within 1/30 s). Controllers: the paper's P-law "
           "as printed with a scheduled V_p (the library's default gain since issue 13), with "
           "the old fixed default V_p = 2.5e-4 and with V_p = 0.012, and with the set point "
           "from a sweep (`SweepIntegrationTime` of the sequence's first view within the "
@@ -260,17 +260,19 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
   const Outcome& ps = find("may-proportional (sweep set point)");
   const Outcome& inc = find("may-incremental (scheduled V_p, the default)");
   text << "- The old defaults (printed law, V_p = 2.5e-4, c_0 = 40) use registers " << old.reg_min
-       << "-" << old.reg_max << ": V_p D_t is a few registers at most for this scene, so the "
+       << "-" << old.reg_max
+       << ": V_p D_t is a few registers at most for this scene, so the "
           "law hardly leaves c_0 (steady-state error in reach "
-       << F(old.steady_reachable, 3) << "). A V_p large enough to move the dim start (0.012) "
+       << F(old.steady_reachable, 3)
+       << "). A V_p large enough to move the dim start (0.012) "
           "swings with "
        << hot.reversals << " reversals over registers " << hot.reg_min << "-" << hot.reg_max
        << ": the loop gain V_p dĪ/dc is far above 1 once the hand is in. No fixed V_p serves "
           "both: dĪ/dc spans three orders of magnitude between the dim hall and the hand.\n";
   text << "- The default controller (incremental law, V_p,t = 0.5 c_t / Ī_t) has a steady-state "
           "error in reach of "
-       << F(inc.steady_reachable, 3) << " with " << inc.reversals
-       << " reversals and registers " << inc.reg_min << "-" << inc.reg_max
+       << F(inc.steady_reachable, 3) << " with " << inc.reversals << " reversals and registers "
+       << inc.reg_min << "-" << inc.reg_max
        << ": the scheduled gain keeps the loop gain at 0.5 in every segment.\n";
   text << "- With the sweep's set point (I_A = " << F(sweep_setpoint.target_intensity, 5)
        << ", c_0 = " << sweep_setpoint.bias_register

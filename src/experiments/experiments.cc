@@ -190,7 +190,9 @@ std::string ResultsPreamble(const std::vector<ExperimentResult>& results,
                     " at 4 ms (fig. 2); the pavilion's amplitude plateau starts at register " +
                     F(metric("fig3", "amplitude_max_register"), 3) + " with mean intensity " +
                     F(metric("fig3", "intensity_at_amplitude_max"), 5) + ", which puts I_A at " +
-                    F(ia, 5) + " (fig. 3; the paper: 15000-18000).");
+                    F(ia, 5) +
+                    " (fig. 3; the paper: 15000-18000). Both are tuning targets of the "
+                    "simulator, not results (see below).");
   }
   const double map_diff = metric("fig2", "bias_map_rms_difference_m");
   if (std::isfinite(map_diff)) {
@@ -202,6 +204,34 @@ std::string ResultsPreamble(const std::vector<ExperimentResult>& results,
                     " RMS, fig. 2); eq. 2 sees such a bias only where it also costs amplitude "
                     "(figs. 8/9).");
   }
+  const double near_i = metric("fig5", "near_intensity_at_amplitude_max");
+  const double far_i = metric("fig5", "far_intensity_at_amplitude_max");
+  const double pav_i = metric("fig3", "intensity_at_amplitude_max");
+  if (std::isfinite(near_i) && std::isfinite(far_i) && std::isfinite(pav_i)) {
+    notes.push_back(
+        "**One I_A does not suit every scene.** The paper found I_A = 15000-18000 \"provided "
+        "reliable results\" and sets it once. The mean intensity at the amplitude maximum, which "
+        "I_A should sit a little below, is " +
+        F(pav_i, 5) + " for the pavilion (fig. 3), " + F(near_i, 5) +
+        " for the pavilion in fig. 5's coarser sweep and " + F(far_i, 5) +
+        " for the same hall at night without near objects (fig. 5, where the amplitude still "
+        "rises at the longest exposure): a fixed I_A is right for the scene it was chosen on. "
+        "tofcam's default controller therefore keeps I_A fixed but schedules its gain per frame "
+        "and stops at the register bound when I_A is out of reach (docs/controllers.md).");
+  }
+  notes.push_back(
+      "**Predictions and tuning targets.** The simulator's free parameters were set once "
+      "(docs/simulator.md) to reproduce three of the paper's observations, so agreeing with "
+      "them is by construction and is not a result: the pavilion's amplitude plateau near "
+      "I_A = 15000-18000 (fig. 3; LED power, poster distance, daylight), the hand clipping at "
+      "15 ms but not at 4 ms (fig. 2; LED power, hand and wall distances), the lamps raising the "
+      "intensity several-fold (figs. 10/11; lamp power and distance). Everything else below is "
+      "a prediction of the physics and the paper's methods, tested against the simulator's "
+      "ground truth: ΔL's noise scale (0.165 against 0.163 derived from the sensor model), "
+      "the scattering bias not depending on the exposure, blooming's extra noise, what the "
+      "filters remove and keep (judged by measured errors, not by the simulator's closed-form "
+      "σ, which is eq. 2's own model), the calibration's held-out error, the controllers' "
+      "behaviour, the finger gaps of fig. 9.");
   if (!notes.empty()) {
     md << "**Read every table with this in mind** (numbers from the runs below):\n\n";
     for (const std::string& note : notes) md << "- " << note << "\n";

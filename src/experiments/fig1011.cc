@@ -133,8 +133,7 @@ ExperimentResult Fig1011(const ExperimentOptions& o) {
     text << ": the lamps' infrared is offset without modulation, so it adds shot noise and "
             "no signal, as the paper's section III-C describes";
   }
-  text << ". Noisy area, as measured: pixels whose RMS error against the truth over the "
-       << frames
+  text << ". Noisy area, as measured: pixels whose RMS error against the truth over the " << frames
        << " frames the lamps at least double and raise clearly past the threshold (to 1.5 x 7 "
           "cm or more: ΔL is estimated from noisy registers, so pixels right at the threshold "
           "fall either side); precise: pixels whose RMS error stays below 3.5 cm with the lamps "

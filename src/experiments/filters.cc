@@ -53,10 +53,11 @@ void SmoothingTable(const ExperimentOptions& o, const Shared& s, ExperimentResul
     SpatialFilterKind kind = SpatialFilterKind::kMedian;
     bool temporal = false;
   };
-  const std::vector<Variant> variants = {{"none"},
-                                         {"median 3x3", true, SpatialFilterKind::kMedian},
-                                         {"bilateral 3x3 (ΔL)", true, SpatialFilterKind::kBilateral},
-                                         {"temporal (ΔL, 8 frames)", false, {}, true}};
+  const std::vector<Variant> variants = {
+      {"none"},
+      {"median 3x3", true, SpatialFilterKind::kMedian},
+      {"bilateral 3x3 (ΔL)", true, SpatialFilterKind::kBilateral},
+      {"temporal (ΔL, 8 frames)", false, {}, true}};
   Table t{"filters_smoothing",
           {"scene", "smoothing", "kept pixels", "median |error|", "RMSE within L",
            "bad (> 5 cm) among kept"},

@@ -39,7 +39,8 @@ void TemporalFilter::Reset() {
 void TemporalFilter::Process(MetricFrame& frame) {
   Image<float>& d = frame.radial_distance_m;
   if (!frame.flags.empty() && !frame.flags.SameSize(d)) {
-    throw Error(ErrorCode::kInvalidArgument, "temporal filter: flags differ in size from the distances");
+    throw Error(ErrorCode::kInvalidArgument,
+                "temporal filter: flags differ in size from the distances");
   }
   if (!frame.delta_l_m.empty() && !frame.delta_l_m.SameSize(d)) {
     throw Error(ErrorCode::kInvalidArgument,

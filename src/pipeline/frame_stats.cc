@@ -159,8 +159,8 @@ FrameStats ComputeFrameStats(const MetricFrame& frame, const FrameStatsOptions& 
   s.timestamp_s = static_cast<double>(frame.info.timestamp_ns) * 1e-9;
   s.integration_time_register = frame.info.integration_time_register;
   s.integration_time_us = frame.info.integration_time_us;
-  s.mean_intensity = MeanControlIntensity(frame, options.intensity_roi,
-                                          options.intensity_exclude_flags, options.intensity_clipped);
+  s.mean_intensity = MeanControlIntensity(
+      frame, options.intensity_roi, options.intensity_exclude_flags, options.intensity_clipped);
   s.pixels = static_cast<int>(distance.size());
   s.has_truth = truth != nullptr;
 

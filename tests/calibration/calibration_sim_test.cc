@@ -19,7 +19,7 @@ namespace tofcam {
 namespace {
 
 std::unique_ptr<sim::SimulatedCamera> WallCamera(double distance_m, std::uint64_t seed,
-                                                bool wiggling = true) {
+                                                 bool wiggling = true) {
   sim::SimulatorOptions o;
   o.seed = seed;
   o.wiggling = wiggling;

@@ -251,8 +251,8 @@ TEST(MaxRegisterForFrameRateTest, HandComputed) {
   sr2.readout_time_us = 4000.0;
   // (1e6 / 30 - 4000) / 255 = 115.03 -> 115.
   EXPECT_EQ(MaxRegisterForFrameRate(sr2, 30.0), 115);
-  EXPECT_EQ(MaxRegisterForFrameRate(sr2, 1.0), 255);      // capped by the camera
-  EXPECT_EQ(MaxRegisterForFrameRate(sr2, 200.0), 3);      // 1000 µs / 255 = 3.9
+  EXPECT_EQ(MaxRegisterForFrameRate(sr2, 1.0), 255);               // capped by the camera
+  EXPECT_EQ(MaxRegisterForFrameRate(sr2, 200.0), 3);               // 1000 µs / 255 = 3.9
   EXPECT_THROW((void)MaxRegisterForFrameRate(sr2, 300.0), Error);  // 3.3 ms < readout
   EXPECT_THROW((void)MaxRegisterForFrameRate(sr2, 0.0), Error);
   EXPECT_THROW((void)MaxRegisterForFrameRate(sr2, std::nan("")), Error);

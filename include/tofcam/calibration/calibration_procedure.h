@@ -93,8 +93,8 @@ struct WallCalibrationReport {
   /// the smallest, 0 otherwise: at a bound the wall was too dark (or too bright) for its set
   /// point and the calibration was taken at a clipped exposure. Always 0 for the Fixed kind.
   int exposure_at_bound = 0;
-  int warmup_frames = 0;         ///< Frames discarded while the drift settled (incl. the window).
-  double drift_m_per_s = 0.0;    ///< Drift rate at the end of the warm-up, m/s.
+  int warmup_frames = 0;       ///< Frames discarded while the drift settled (incl. the window).
+  double drift_m_per_s = 0.0;  ///< Drift rate at the end of the warm-up, m/s.
   int uncalibrated_pixels = 0;
   double mean_offset_m = 0.0;  ///< Mean of the offset matrix over calibrated pixels.
   double offset_rms_m = 0.0;   ///< RMS of the offset matrix (how wrong an uncalibrated camera is).

@@ -27,8 +27,8 @@ struct CameraInfo {
   /// Dead time per frame besides integration, µs (>= 0): a frame takes at least integration +
   /// readout. 0 when the source does not say (recordings, importers).
   double readout_time_us = 0.0;
-  bool has_intensity = true;        ///< False for sources without an offset channel.
-  bool has_ground_truth = false;    ///< True for simulators.
+  bool has_intensity = true;      ///< False for sources without an offset channel.
+  bool has_ground_truth = false;  ///< True for simulators.
 
   [[nodiscard]] int width() const noexcept { return intrinsics.width; }
   [[nodiscard]] int height() const noexcept { return intrinsics.height; }

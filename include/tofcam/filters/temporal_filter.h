@@ -27,11 +27,11 @@
 namespace tofcam {
 
 struct TemporalFilterOptions {
-  double reset_sigma = 3.0;       ///< Motion test, in σ of the innovation; (0, 100].
-  double drift_sigma = 1.5;       ///< Drift test, in σ of the innovation; (0, reset_sigma].
-  int drift_frames = 3;           ///< Frames of one-signed drift that mean motion; [2, 100].
-  int max_frames = 8;             ///< Longest effective average, frames; [1, 10000].
-  int max_gap_frames = 2;         ///< Rejected frames before a pixel's state is forgotten; >= 0.
+  double reset_sigma = 3.0;        ///< Motion test, in σ of the innovation; (0, 100].
+  double drift_sigma = 1.5;        ///< Drift test, in σ of the innovation; (0, reset_sigma].
+  int drift_frames = 3;            ///< Frames of one-signed drift that mean motion; [2, 100].
+  int max_frames = 8;              ///< Longest effective average, frames; [1, 10000].
+  int max_gap_frames = 2;          ///< Rejected frames before a pixel's state is forgotten; >= 0.
   double fallback_sigma_m = 0.02;  ///< σ where ΔL is missing, m; > 0.
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;
@@ -57,7 +57,7 @@ class TemporalFilter {
  private:
   TemporalFilterOptions options_;
   int width_ = 0, height_ = 0;
-  std::vector<float> mean_m_;      // μ
+  std::vector<float> mean_m_;       // μ
   std::vector<float> variance_m2_;  // v; 0 = no state
   std::vector<std::uint16_t> count_;
   std::vector<std::uint8_t> gap_;
