@@ -6,6 +6,7 @@ packages=(
   build-essential cmake pkg-config
   libeigen3-dev libembree-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   libpng-dev libhdf5-dev libtinyobjloader-dev libnanoflann-dev
+  cyclonedds-dev cyclonedds-tools
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev clang-format clang-tidy
   python3-dev python3-numpy python3-matplotlib python3-pytest pybind11-dev
