@@ -21,6 +21,9 @@ void ValidateFrame(const Frame& frame, const std::string& what) {
   if (!frame.source_flags.empty() && !frame.source_flags.SameSize(w, h)) {
     throw Error(ErrorCode::kInvalidArgument, what + ": source flags differ in size from frame");
   }
+  if (!frame.confidence.empty() && !frame.confidence.SameSize(w, h)) {
+    throw Error(ErrorCode::kInvalidArgument, what + ": confidence differs in size from frame");
+  }
   const double f = frame.info.modulation_frequency_hz;
   if (!std::isfinite(f) || f <= 0.0) {
     throw Error(ErrorCode::kInvalidArgument, what + ": modulation frequency must be > 0 Hz");

@@ -25,6 +25,7 @@ void FilterSetOptions::Validate() const {
   if (amplitude_enabled) amplitude.Validate();
   if (saturation_enabled) saturation.Validate();
   if (accuracy_enabled) accuracy.Validate();
+  if (confidence_enabled) confidence.Validate();
   if (flying_pixel_enabled) flying_pixel.Validate();
   if (jump_edge_enabled) jump_edge.Validate();
   if (weingarten_enabled) weingarten.Validate();
@@ -67,6 +68,7 @@ void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays, const Filt
   auto data = [](const Image<float>& c) { return c.empty() ? nullptr : c.data(); };
   kernels::PixelFiltersSpan(plan, out.size(), frame.radial_distance_m.data(), data(frame.amplitude),
                             data(frame.intensity), data(frame.delta_l_m), out.data());
+  if (o.confidence_enabled) ConfidenceThresholdInto(frame, o.confidence, out);
   fi::NeighbourhoodFiltersInto(frame, rays, o, out);
 }
 

@@ -294,6 +294,10 @@ void AmplitudeThresholdOptions::Validate() const {
   RequireRange(min_amplitude, 0.0, 65532.0, "amplitude.min_amplitude");
 }
 
+void ConfidenceThresholdOptions::Validate() const {
+  RequireRange(min_confidence, 0.0, 1e9, "confidence.min_confidence");
+}
+
 void SaturationOptions::Validate() const {
   RequireRange(max_intensity, 1e-9, 1e9, "saturation.max_intensity");
   RequireRange(max_amplitude, 1e-9, 1e9, "saturation.max_amplitude");
@@ -341,6 +345,32 @@ Image<PixelFlags> RangeFilter(const MetricFrame& frame, const RangeOptions& opti
   filters_internal::CheckFrame(frame, "range filter");
   Image<PixelFlags> out = Blank(frame);
   filters_internal::RangeInto(frame, options, out);
+  return out;
+}
+
+void ConfidenceThresholdInto(const MetricFrame& frame, const ConfidenceThresholdOptions& options,
+                             Image<PixelFlags>& out) {
+  options.Validate();
+  if (frame.confidence.empty()) return;
+  if (!frame.confidence.SameSize(out) || !out.SameSize(frame.radial_distance_m)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "confidence filter: confidence, flags and distance differ in size");
+  }
+  const float min = static_cast<float>(options.min_confidence);
+  const float* c = frame.confidence.data();
+  PixelFlags* o = out.data();
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    // !(c >= min) also rejects NaN.
+    if (!(c[i] >= min)) o[i] |= Flag::kLowConfidence;
+  }
+}
+
+Image<PixelFlags> ConfidenceThresholdFilter(const MetricFrame& frame,
+                                            const ConfidenceThresholdOptions& options) {
+  options.Validate();
+  filters_internal::CheckFrame(frame, "confidence filter");
+  Image<PixelFlags> out = Blank(frame);
+  ConfidenceThresholdInto(frame, options, out);
   return out;
 }
 

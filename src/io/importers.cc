@@ -1,8 +1,10 @@
 #include "tofcam/io/importers.h"
 
 #include <algorithm>
+#include <cctype>
 #include <charconv>
 #include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <system_error>
 
@@ -65,11 +67,14 @@ ImportedSequence ParseAdiInterleaved(std::string_view bytes, int width, int heig
   const double f = FrequencyForRange(kImportRangeAdiM);
   seq.camera = ImportedCameraInfo("ADI ADTF3175", AdiNominalIntrinsics(width, height), f);
   Frame frame = BlankFrame(width, height, seq.camera.model, f);
+  frame.confidence = Image<float>(width, height);
+  frame.info.confidence_source = "ADI 255 - confidence byte (0 = best in the file)";
   for (std::size_t i = 0; i < n; ++i) {
     const std::size_t o = i * 5;
     SetDistanceMm(frame, i, U16Le(bytes, o), kImportRangeAdiM);
-    // Byte o + 2 is the camera's confidence (0 = best). The camera already zeroes the depth of
-    // pixels it distrusts (depth 0 -> kInvalid above), so it is not mapped further.
+    // Byte o + 2 is the camera's confidence, 0 = best: kept, turned so that higher is better
+    // (Frame::confidence). The camera already zeroes the depth of pixels it distrusts.
+    frame.confidence[i] = static_cast<float>(255 - static_cast<unsigned char>(bytes[o + 2]));
     SetAmplitude(frame, i, U16Le(bytes, o + 3));
   }
   seq.frames.push_back(std::move(frame));
@@ -291,133 +296,351 @@ CameraIntrinsics MesaNominalIntrinsics(int width, int height) {
 
 }  // namespace
 
-ImportedSequence ParseMesaDat(std::string_view text, const std::string& name) {
+namespace {
+
+// The sections of a MESA sample-viewer export, recognised by words in their '%' header lines.
+enum class MesaSection { kZ, kX, kY, kAmplitude, kConfidence, kTimestamp, kOther };
+constexpr int kMesaImageSections = 5;
+
+MesaSection ClassifyMesaHeader(std::string_view header) {
+  // Lower-case words of the header; units in brackets and punctuation separate words.
+  std::vector<std::string> words(1);
+  for (char c : header) {
+    if (std::isalnum(static_cast<unsigned char>(c))) {
+      words.back() += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    } else if (!words.back().empty()) {
+      words.emplace_back();
+    }
+  }
+  auto word = [&](const char* w) {
+    return std::find(words.begin(), words.end(), w) != words.end();
+  };
+  auto part = [&](const char* w) {
+    return std::any_of(words.begin(), words.end(),
+                       [&](const std::string& x) { return x.find(w) != std::string::npos; });
+  };
+  if (part("time")) return MesaSection::kTimestamp;
+  if (part("xvector") || word("x")) return MesaSection::kX;
+  if (part("yvector") || word("y")) return MesaSection::kY;
+  if (part("distance") || part("zvector") || word("z")) return MesaSection::kZ;
+  if (part("amplitude")) return MesaSection::kAmplitude;
+  if (part("confidence")) return MesaSection::kConfidence;
+  return MesaSection::kOther;
+}
+
+const char* MesaSectionName(int s) {
+  static constexpr const char* kNames[] = {"Calibrated Distance", "Calibrated xVector",
+                                           "Calibrated yVector", "Amplitude", "Confidence map"};
+  return kNames[s];
+}
+
+struct MesaRawFrame {
+  std::vector<double> channel[kMesaImageSections];
+  std::optional<double> timestamp_ms;
+  std::size_t first_line = 0;
+};
+
+}  // namespace
+
+namespace {
+
+// Parses one export. Time stamps are made relative to `t0_ms`, which is set from the first
+// frame when empty (a sequence of files shares the first file's). `camera` (when not null) is
+// the sequence's camera: its size must match and its intrinsics are kept.
+ImportedSequence ParseMesaDatImpl(std::string_view text, const std::string& name,
+                                  std::optional<double>& t0_ms, const CameraInfo* camera) {
   constexpr int kMaxSide = 4096;
   constexpr std::size_t kMaxFrames = 100000;
   const std::vector<Line> lines = SplitLines(text);
-  std::size_t li = 0;
-  int width = 0, height = 0;
-  std::vector<double> numbers;
-  struct RawFrame {
-    std::vector<double> channel[5];
-    double timestamp_ms = 0;
-  };
-  std::vector<RawFrame> raw;
   auto where = [&](std::size_t index) {
     return name + " line " +
            std::to_string(index < lines.size() ? lines[index].number
                                                : (lines.empty() ? 0 : lines.back().number));
   };
-  while (li < lines.size()) {
+  int width = 0, height = 0;
+  std::vector<double> numbers;
+  std::vector<MesaRawFrame> raw;
+  MesaRawFrame current;
+  bool open = false;  // `current` has at least one section
+  auto finish = [&](std::size_t at) {
+    if (!open) return;
+    for (int s : {0, 1, 2, 3}) {
+      if (current.channel[s].empty()) {
+        throw Error(ErrorCode::kFormat, where(at) + ": frame " + std::to_string(raw.size() + 1) +
+                                            " has no '% " + MesaSectionName(s) + "' section");
+      }
+    }
+    if (!current.timestamp_ms) {
+      throw Error(ErrorCode::kFormat, where(at) + ": frame " + std::to_string(raw.size() + 1) +
+                                          " has no timestamp section ('% ... time stamp [ms]')");
+    }
     if (raw.size() >= kMaxFrames) FormatError(name, "more than 100000 frames");
-    RawFrame frame;
-    for (int s = 0; s < 5; ++s) {
-      if (li >= lines.size() || lines[li].text.front() != '%') {
-        throw Error(ErrorCode::kFormat, where(li) + ": expected a '%' section header (section " +
-                                            std::to_string(s + 1) + " of 5)");
-      }
-      ++li;
-      std::vector<double>& values = frame.channel[s];
-      int rows = 0;
-      // The first section of the first frame defines the size: rows up to the next '%' line.
-      while (li < lines.size() && lines[li].text.front() != '%' && (height == 0 || rows < height)) {
-        if (!ParseNumbers(lines[li].text, numbers)) {
-          throw Error(ErrorCode::kFormat, where(li) + ": not a list of numbers");
-        }
-        if (width == 0) {
-          if (numbers.empty() || numbers.size() > kMaxSide) {
-            throw Error(ErrorCode::kFormat,
-                        where(li) + ": row of " + std::to_string(numbers.size()) + " values");
-          }
-          width = static_cast<int>(numbers.size());
-        }
-        if (static_cast<int>(numbers.size()) != width) {
-          throw Error(ErrorCode::kFormat, where(li) + ": row has " +
-                                              std::to_string(numbers.size()) +
-                                              " values, expected " + std::to_string(width));
-        }
-        values.insert(values.end(), numbers.begin(), numbers.end());
-        ++rows;
-        ++li;
-        if (height == 0 && rows > kMaxSide) {
-          throw Error(ErrorCode::kFormat, where(li) + ": more than 4096 rows in a section");
-        }
-      }
-      if (height == 0) {
-        if (rows == 0) throw Error(ErrorCode::kFormat, where(li) + ": empty section");
-        height = rows;
-      }
-      if (rows != height) {
-        throw Error(ErrorCode::kFormat, where(li) + ": section has " + std::to_string(rows) +
-                                            " rows, expected " + std::to_string(height));
-      }
+    raw.push_back(std::move(current));
+    current = MesaRawFrame();
+    open = false;
+  };
+  std::size_t li = 0;
+  while (li < lines.size()) {
+    if (lines[li].text.front() != '%') {
+      throw Error(ErrorCode::kFormat, where(li) + ": numbers outside a '%' section");
     }
-    // The timestamp line: the last number on it, or on the next line when it is a bare header.
-    if (li >= lines.size()) {
-      throw Error(ErrorCode::kFormat,
-                  where(li) + ": missing timestamp line after frame " + std::to_string(raw.size()));
-    }
-    std::string_view ts = lines[li].text;
-    bool header_only = false;
-    if (ts.front() == '%') {
-      ts.remove_prefix(1);
-      // Keep only the part after the last ':' or '=' (e.g. "% timestamp [ms]: 1234").
-      const std::size_t sep = ts.find_last_of(":=");
-      if (sep != std::string_view::npos) ts.remove_prefix(sep + 1);
-      header_only = !ParseNumbers(ts, numbers) || numbers.empty();
-    }
-    if (header_only) {
-      ++li;
-      if (li >= lines.size()) throw Error(ErrorCode::kFormat, where(li) + ": missing timestamp");
-      ts = lines[li].text;
-    }
-    if (!ParseNumbers(ts, numbers) || numbers.empty() || !std::isfinite(numbers.back())) {
-      throw Error(ErrorCode::kFormat, where(li) + ": expected a timestamp");
-    }
-    frame.timestamp_ms = numbers.back();
+    std::string_view header = lines[li].text.substr(1);
+    const MesaSection kind = ClassifyMesaHeader(header);
+    const std::size_t header_line = li;
     ++li;
-    raw.push_back(std::move(frame));
+    // The rows of this section: every line up to the next '%' line.
+    const std::size_t rows_begin = li;
+    while (li < lines.size() && lines[li].text.front() != '%') ++li;
+    const std::size_t rows = li - rows_begin;
+    if (kind == MesaSection::kOther) continue;  // a comment or a section tofcam does not use
+    if (kind == MesaSection::kTimestamp) {
+      // "% ... time stamp [ms]" then a row whose first finite number is the time stamp (the
+      // sample viewer pads the row with nan to the image width); an older layout puts the
+      // number on the header line itself ("% timestamp [ms]: 1234").
+      double ts = std::numeric_limits<double>::quiet_NaN();
+      if (rows == 0) {
+        const std::size_t sep = header.find_last_of(":=");
+        if (sep != std::string_view::npos && ParseNumbers(header.substr(sep + 1), numbers) &&
+            !numbers.empty()) {
+          ts = numbers.front();
+        }
+      } else {
+        if (rows > 1) {
+          throw Error(ErrorCode::kFormat,
+                      where(rows_begin + 1) + ": time stamp section has more than one row");
+        }
+        if (!ParseNumbers(lines[rows_begin].text, numbers)) {
+          throw Error(ErrorCode::kFormat, where(rows_begin) + ": not a list of numbers");
+        }
+        for (double v : numbers) {
+          if (std::isfinite(v)) {
+            ts = v;
+            break;
+          }
+        }
+      }
+      if (!std::isfinite(ts)) {
+        throw Error(ErrorCode::kFormat, where(rows == 0 ? header_line : rows_begin) +
+                                            ": expected a time stamp (ms), found none");
+      }
+      if (!open) {
+        throw Error(ErrorCode::kFormat, where(header_line) + ": time stamp before any image");
+      }
+      current.timestamp_ms = ts;
+      finish(li);
+      continue;
+    }
+    const int s = static_cast<int>(kind);
+    if (open && !current.channel[s].empty()) finish(header_line);  // a new frame starts
+    if (!open) current.first_line = header_line;
+    open = true;
+    if (height == 0) {
+      if (rows == 0) throw Error(ErrorCode::kFormat, where(header_line) + ": empty section");
+      if (rows > static_cast<std::size_t>(kMaxSide)) {
+        throw Error(ErrorCode::kFormat, where(header_line) + ": more than 4096 rows in a section");
+      }
+      height = static_cast<int>(rows);
+    }
+    if (rows != static_cast<std::size_t>(height)) {
+      throw Error(ErrorCode::kFormat, where(header_line) + ": section '" + std::string(header) +
+                                          "' has " + std::to_string(rows) + " rows, expected " +
+                                          std::to_string(height));
+    }
+    std::vector<double>& values = current.channel[s];
+    for (std::size_t r = rows_begin; r < li; ++r) {
+      if (!ParseNumbers(lines[r].text, numbers)) {
+        throw Error(ErrorCode::kFormat, where(r) + ": not a list of numbers");
+      }
+      if (width == 0) {
+        if (numbers.empty() || numbers.size() > static_cast<std::size_t>(kMaxSide)) {
+          throw Error(ErrorCode::kFormat,
+                      where(r) + ": row of " + std::to_string(numbers.size()) + " values");
+        }
+        width = static_cast<int>(numbers.size());
+      }
+      if (numbers.size() != static_cast<std::size_t>(width)) {
+        throw Error(ErrorCode::kFormat, where(r) + ": row has " + std::to_string(numbers.size()) +
+                                            " values, expected " + std::to_string(width));
+      }
+      values.insert(values.end(), numbers.begin(), numbers.end());
+    }
   }
-  if (raw.empty()) FormatError(name, "no frames");
+  finish(lines.size());
+  if (raw.empty()) FormatError(name, "no frames (no '% Calibrated Distance' section)");
 
   ImportedSequence seq;
   const double f = kMesaModulationFrequencyHz;
   const double range_m = UnambiguousRangeM(f);
   const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
-  std::vector<io_internal::PixelPoint> points;
-  for (std::size_t i = 0; i < n; ++i) {
-    const RawFrame& r = raw.front();
-    if (r.channel[4][i] > 0) {
-      points.push_back({static_cast<double>(i % width), static_cast<double>(i / width),
-                        r.channel[1][i], r.channel[2][i], r.channel[0][i]});
+  auto usable = [](const MesaRawFrame& r, std::size_t i) {
+    const bool confident = r.channel[4].empty() || r.channel[4][i] > 0;
+    return r.channel[0][i] > 0 && std::isfinite(r.channel[0][i]) &&
+           std::isfinite(r.channel[1][i]) && std::isfinite(r.channel[2][i]) && confident;
+  };
+  if (camera != nullptr) {
+    if (camera->width() != width || camera->height() != height) {
+      FormatError(name, std::to_string(width) + " x " + std::to_string(height) +
+                            " pixels, the sequence's first file has " +
+                            std::to_string(camera->width()) + " x " +
+                            std::to_string(camera->height()));
     }
+    seq.camera = *camera;
+  } else {
+    std::vector<io_internal::PixelPoint> points;
+    for (std::size_t i = 0; i < n; ++i) {
+      const MesaRawFrame& r = raw.front();
+      if (usable(r, i)) {
+        points.push_back({static_cast<double>(i % width), static_cast<double>(i / width),
+                          r.channel[1][i], r.channel[2][i], r.channel[0][i]});
+      }
+    }
+    seq.camera = ImportedCameraInfo(
+        "MESA SR-4000",
+        io_internal::FitPinhole(points, width, height, MesaNominalIntrinsics(width, height)), f);
   }
-  seq.camera = ImportedCameraInfo(
-      "MESA SR-4000",
-      io_internal::FitPinhole(points, width, height, MesaNominalIntrinsics(width, height)), f);
-  const double t0 = raw.front().timestamp_ms;
+  if (!t0_ms) t0_ms = *raw.front().timestamp_ms;
+  const double t0 = *t0_ms;
   for (std::size_t fi = 0; fi < raw.size(); ++fi) {
-    const RawFrame& r = raw[fi];
+    const MesaRawFrame& r = raw[fi];
     Frame frame = BlankFrame(width, height, seq.camera.model, f);
     frame.info.sequence = fi;
-    const double dt_ns = (r.timestamp_ms - t0) * 1e6;
-    if (!(std::abs(dt_ns) < 9e18)) FormatError(name, "timestamp out of range");
+    const double dt_ns = (*r.timestamp_ms - t0) * 1e6;
+    if (!(std::abs(dt_ns) < 9e18)) FormatError(name, "time stamp out of range");
     frame.info.timestamp_ns = static_cast<std::int64_t>(std::llround(dt_ns));
+    const bool has_confidence = !r.channel[4].empty();
+    if (has_confidence) {
+      frame.confidence = Image<float>(width, height);
+      frame.info.confidence_source = "MESA confidence map";
+    }
     for (std::size_t i = 0; i < n; ++i) {
       const double z = r.channel[0][i], x = r.channel[1][i], y = r.channel[2][i];
       const double radial_mm = 1000.0 * std::sqrt(x * x + y * y + z * z);
-      const bool ok = z > 0 && std::isfinite(radial_mm) && r.channel[4][i] > 0;
-      SetDistanceMm(frame, i, ok ? radial_mm : 0.0, range_m);
+      SetDistanceMm(frame, i, usable(r, i) ? radial_mm : 0.0, range_m);
       SetAmplitude(frame, i, r.channel[3][i]);
+      if (has_confidence) {
+        const double c = r.channel[4][i];
+        frame.confidence[i] =
+            std::isfinite(c) && c > 0 ? static_cast<float>(std::min(c, 1e9)) : 0.0f;
+      }
     }
     seq.frames.push_back(std::move(frame));
   }
   return seq;
 }
 
-ImportedSequence ImportMesaDat(const std::filesystem::path& dat_file) {
-  // The parsed values take about 20 times the text's size in memory: cap the file at 256 MiB.
-  return ParseMesaDat(ReadFile(dat_file, std::size_t{1} << 28), dat_file.string());
+}  // namespace
+
+ImportedSequence ParseMesaDat(std::string_view text, const std::string& name) {
+  std::optional<double> t0_ms;
+  return ParseMesaDatImpl(text, name, t0_ms, nullptr);
+}
+
+namespace {
+
+// "frm_2.dat" before "frm_10.dat": digit runs compare by value.
+bool NaturalLess(const std::string& a, const std::string& b) {
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (std::isdigit(static_cast<unsigned char>(a[i])) &&
+        std::isdigit(static_cast<unsigned char>(b[j]))) {
+      std::size_t ie = i, je = j;
+      while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
+      while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
+      std::string_view da(a.data() + i, ie - i), db(b.data() + j, je - j);
+      while (da.size() > 1 && da.front() == '0') da.remove_prefix(1);
+      while (db.size() > 1 && db.front() == '0') db.remove_prefix(1);
+      if (da.size() != db.size()) return da.size() < db.size();
+      if (da != db) return da < db;
+      i = ie;
+      j = je;
+    } else {
+      if (a[i] != b[j]) return a[i] < b[j];
+      ++i;
+      ++j;
+    }
+  }
+  return a.size() - i < b.size() - j;
+}
+
+// Shell-style match of '*' and '?' (no character classes).
+bool GlobMatch(std::string_view pattern, std::string_view s) {
+  std::size_t p = 0, i = 0, star = std::string_view::npos, mark = 0;
+  while (i < s.size()) {
+    if (p < pattern.size() && (pattern[p] == '?' || pattern[p] == s[i])) {
+      ++p;
+      ++i;
+    } else if (p < pattern.size() && pattern[p] == '*') {
+      star = p++;
+      mark = i;
+    } else if (star != std::string_view::npos) {
+      p = star + 1;
+      i = ++mark;
+    } else {
+      return false;
+    }
+  }
+  while (p < pattern.size() && pattern[p] == '*') ++p;
+  return p == pattern.size();
+}
+
+}  // namespace
+
+std::vector<std::filesystem::path> ExpandSequencePath(const std::filesystem::path& path,
+                                                      const std::string& extension) {
+  namespace fs = std::filesystem;
+  const std::string text = path.string();
+  std::vector<fs::path> files;
+  std::error_code ec;
+  if (text.find_first_of("*?") != std::string::npos) {
+    const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+    const std::string pattern = path.filename().string();
+    if (dir.string().find_first_of("*?") != std::string::npos) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  text + ": wildcards are allowed in the file name only, not in folders");
+    }
+    if (!fs::is_directory(dir, ec))
+      throw Error(ErrorCode::kNotFound, text + ": no folder " + dir.string());
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      if (entry.is_regular_file(ec) && GlobMatch(pattern, entry.path().filename().string())) {
+        files.push_back(entry.path());
+      }
+    }
+    if (files.empty()) throw Error(ErrorCode::kNotFound, text + ": no file matches");
+  } else if (fs::is_directory(path, ec)) {
+    for (const auto& entry : fs::directory_iterator(path, ec)) {
+      if (entry.is_regular_file(ec) && entry.path().extension() == extension) {
+        files.push_back(entry.path());
+      }
+    }
+    if (files.empty()) {
+      throw Error(ErrorCode::kNotFound, text + ": folder holds no " + extension + " file");
+    }
+  } else {
+    if (!fs::exists(path, ec)) throw Error(ErrorCode::kNotFound, text + ": no such file");
+    files.push_back(path);
+  }
+  std::sort(files.begin(), files.end(), [](const fs::path& a, const fs::path& b) {
+    return NaturalLess(a.filename().string(), b.filename().string());
+  });
+  return files;
+}
+
+ImportedSequence ImportMesaDat(const std::filesystem::path& path) {
+  const std::vector<std::filesystem::path> files = ExpandSequencePath(path, ".dat");
+  ImportedSequence seq;
+  std::optional<double> t0_ms;
+  for (std::size_t k = 0; k < files.size(); ++k) {
+    // The parsed values take about 20 times the text's size in memory: cap a file at 256 MiB.
+    ImportedSequence part =
+        ParseMesaDatImpl(ReadFile(files[k], std::size_t{1} << 28), files[k].string(), t0_ms,
+                         k == 0 ? nullptr : &seq.camera);
+    if (k == 0) seq.camera = part.camera;  // intrinsics fitted on the first file's first frame
+    for (Frame& frame : part.frames) {
+      frame.info.sequence = seq.frames.size();
+      seq.frames.push_back(std::move(frame));
+    }
+  }
+  return seq;
 }
 
 // ---------------------------------------------------------------------------------------------

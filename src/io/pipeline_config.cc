@@ -73,6 +73,11 @@ void VisitOptions(V& v, PipelineOptions& o) {
       v.Field("enabled", o.filters.accuracy_enabled, "");
       v.Field("max_delta_l_m", o.filters.accuracy.max_delta_l_m, "m, (0, 100]");
     });
+    v.Section("confidence", "the camera's own confidence channel, where it has one", [&] {
+      v.Field("enabled", o.filters.confidence_enabled, "");
+      v.Field("min_confidence", o.filters.confidence.min_confidence,
+              "camera units (higher = better), [0, 1e9]");
+    });
     v.Section("flying_pixel", "edge-aware flying-pixel filter (libfreenect2 style)", [&] {
       v.Field("enabled", o.filters.flying_pixel_enabled, "");
       v.Field("min_amplitude_contrast", o.filters.flying_pixel.min_amplitude_contrast, ">= 0");

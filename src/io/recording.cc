@@ -111,6 +111,7 @@ struct RecordingWriter::Impl {
   std::vector<Handle> info;
   bool has_flags = false;
   bool has_truth = false;
+  bool has_confidence = false;
   std::string frame_model;
   std::size_t count = 0;
   bool closed = false;
@@ -139,12 +140,16 @@ struct RecordingWriter::Impl {
   void CreateDatasets(const Frame& first) {
     has_flags = !first.source_flags.empty();
     has_truth = first.truth.has_value();
+    has_confidence = !first.confidence.empty();
     frame_model = first.info.camera_model;
     images.emplace_back("distance", CreateImageDataset("distance", H5T_STD_U16LE));
     images.emplace_back("amplitude", CreateImageDataset("amplitude", H5T_STD_U16LE));
     images.emplace_back("intensity", CreateImageDataset("intensity", H5T_STD_U16LE));
     if (has_flags) {
       images.emplace_back("source_flags", CreateImageDataset("source_flags", H5T_STD_U16LE));
+    }
+    if (has_confidence) {
+      images.emplace_back("confidence", CreateImageDataset("confidence", H5T_IEEE_F32LE));
     }
     if (has_truth) {
       images.emplace_back("truth/radial_distance_m",
@@ -174,6 +179,12 @@ struct RecordingWriter::Impl {
     io_internal::WriteScalarAttribute(path, file.get(), "has_frame_truth", H5T_NATIVE_UINT8,
                                       &truth);
     io_internal::WriteStringAttribute(path, file.get(), "frame_camera_model", frame_model);
+    // Absent in files written before the confidence channel existed: read as "none".
+    const std::uint8_t confidence = has_confidence ? 1 : 0;
+    io_internal::WriteScalarAttribute(path, file.get(), "has_confidence", H5T_NATIVE_UINT8,
+                                      &confidence);
+    io_internal::WriteStringAttribute(path, file.get(), "confidence_source",
+                                      first.info.confidence_source);
   }
 
   // Grows a dataset by one frame along dimension 0 and writes `data` into the new slot.
@@ -281,11 +292,12 @@ void RecordingWriter::Append(const Frame& frame) {
   }
   Hdf5Silencer silence;
   if (m.count == 0) m.CreateDatasets(frame);
-  if (m.has_flags == frame.source_flags.empty() || m.has_truth != frame.truth.has_value()) {
+  if (m.has_flags == frame.source_flags.empty() || m.has_truth != frame.truth.has_value() ||
+      m.has_confidence == frame.confidence.empty()) {
     throw Error(ErrorCode::kMismatch,
                 m.path.string() +
-                    ": every frame of a recording must have source flags and ground truth iff "
-                    "the first frame had them");
+                    ": every frame of a recording must have source flags, confidence and ground "
+                    "truth iff the first frame had them");
   }
   if (frame.info.camera_model != m.frame_model) {
     throw Error(ErrorCode::kMismatch, m.path.string() + ": frame camera model '" +
@@ -302,6 +314,10 @@ void RecordingWriter::Append(const Frame& frame) {
   write_u16(frame.amplitude.data());
   write_u16(frame.intensity.data());
   if (m.has_flags) write_u16(frame.source_flags.data());  // PixelFlags is a uint16_t (asserted)
+  if (m.has_confidence) {
+    auto& [name, d] = next();
+    m.AppendRow(d.get(), name, H5T_NATIVE_FLOAT, frame.confidence.data());
+  }
   if (m.has_truth) {
     const GroundTruth& t = *frame.truth;
     auto& [n0, d0] = next();
@@ -361,7 +377,9 @@ struct RecordingReader::Impl {
   RecordingMetadata meta;
   std::size_t count = 0;
   std::vector<FrameInfo> infos;
-  Handle distance, amplitude, intensity, flags, truth_distance, truth_causes, truth_sigma;
+  Handle distance, amplitude, intensity, flags, confidence, truth_distance, truth_causes,
+      truth_sigma;
+  std::string confidence_source;
 
   template <typename T>
   T RequireScalar(const std::string& name, hid_t mem_type) {
@@ -468,6 +486,14 @@ struct RecordingReader::Impl {
                                      &has_truth);
     meta.has_source_flags = has_flags != 0;
     meta.has_ground_truth = has_truth != 0;
+    std::uint8_t has_confidence = 0;
+    io_internal::ReadScalarAttribute(path, file.get(), "has_confidence", H5T_NATIVE_UINT8,
+                                     &has_confidence);
+    meta.has_confidence = has_confidence != 0;
+    if (meta.has_confidence) {
+      io_internal::ReadStringAttribute(path, file.get(), "confidence_source", confidence_source);
+      n = std::min(n, OpenImage(confidence, "confidence", H5T_FLOAT, 4));
+    }
     n = std::min(n, OpenImage(distance, "distance", H5T_INTEGER, 2));
     n = std::min(n, OpenImage(amplitude, "amplitude", H5T_INTEGER, 2));
     n = std::min(n, OpenImage(intensity, "intensity", H5T_INTEGER, 2));
@@ -601,6 +627,18 @@ Frame RecordingReader::Read(std::size_t index) const {
   m.ReadImage(m.intensity, "intensity", H5T_NATIVE_UINT16, index, frame.intensity);
   if (m.meta.has_source_flags) {
     m.ReadImage(m.flags, "source_flags", H5T_NATIVE_UINT16, index, frame.source_flags);
+  }
+  if (m.meta.has_confidence) {
+    m.ReadImage(m.confidence, "confidence", H5T_NATIVE_FLOAT, index, frame.confidence);
+    frame.info.confidence_source = m.confidence_source;
+    for (std::size_t i = 0; i < frame.confidence.size(); ++i) {
+      const float c = frame.confidence[i];
+      if (!(c >= 0.0f) || std::isinf(c)) {
+        Fail(ErrorCode::kFormat, m.path,
+             "confidence of frame " + std::to_string(index) +
+                 " has NaN, negative or infinite values");
+      }
+    }
   }
   if (m.meta.has_ground_truth) {
     GroundTruth t;

@@ -64,6 +64,8 @@ MetricPlan PrepareMetric(const Frame& frame, const MetricConversionOptions& opti
   if (!keep_delta_l) out.delta_l_m = Image<float>();
   out.info = frame.info;
   out.truth = frame.truth;
+  // A per-frame copy only for sources that have the channel (a few real cameras' importers).
+  out.confidence = frame.confidence;
   if (!frame.info.has_intensity) {
     out.intensity = Image<float>();
   } else {

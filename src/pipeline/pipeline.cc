@@ -110,7 +110,9 @@ void Pipeline::Process(const Frame& frame, PipelineResult& result) {
   const bool neighbourhood =
       filters.flying_pixel_enabled || filters.jump_edge_enabled || filters.weingarten_enabled;
   // Smoothing and the temporal filter change distances after the filters: the cloud follows.
-  const bool late_cloud = neighbourhood || options_.smoothing_enabled || temporal_.has_value();
+  const bool confidence = filters.confidence_enabled && !frame.confidence.empty();
+  const bool late_cloud =
+      neighbourhood || confidence || options_.smoothing_enabled || temporal_.has_value();
   MetricFrame& m = result.frame;
   pipeline_internal::FusedStages s;
   s.metric = options_.metric;
@@ -127,6 +129,11 @@ void Pipeline::Process(const Frame& frame, PipelineResult& result) {
   out.filter_flags = &result.filter_flags;
   out.cloud = &result.cloud;
   pipeline_internal::RunFusedPass(frame, s, out);
+  if (confidence) {
+    // The vendor channel is read by few sources, so it stays out of the fused pass.
+    ConfidenceThresholdInto(m, filters.confidence, result.filter_flags);
+    MergeFlags(m, result.filter_flags);
+  }
   if (neighbourhood) {
     // m.flags = input flags | per-pixel filter bits, what the neighbourhood filters must treat
     // as rejected (as in ApplyFilters); they OR into the filter flags.

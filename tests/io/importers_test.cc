@@ -166,6 +166,7 @@ TEST(AdiInterleaved, RegisterIsEightTimesMillimetres) {
       EXPECT_NEAR(Metres(f, i), mm / 1000.0, 1e-9);
     }
     EXPECT_EQ(f.amplitude[i], ab);
+    EXPECT_EQ(f.confidence[i], 255.0f - p[2]);  // kept, turned so that higher is better
   }
   EXPECT_GT(invalid, 0);  // the sample has about 6 % pixels without depth
 }
@@ -466,6 +467,128 @@ TEST(MesaDat, MalformedFilesNameTheLine) {
   std::string missing_row = tiny;
   missing_row.erase(missing_row.find("0.0 0.0 4.0\n"), 12);
   EXPECT_NE(message(missing_row), "no error");
+}
+
+// The layout of a real SR-4000 sample-viewer export (issue 14): one frame per file, five
+// sections of H rows of W tab-separated numbers under these exact headers, then the time stamp
+// row of W numbers: the stamp, then nan. Scene: a plane tilted about the vertical axis,
+// z = 1.5 + 0.4 x (m), seen through fx = fy = 250, cx = 87.5, cy = 71.5.
+std::string RealLayoutMesaFrame(int w, int h, double stamp_ms, double z_shift_m) {
+  const double fx = 250.0, cx = 87.5, cy = 71.5;
+  std::ostringstream out;
+  out.precision(9);
+  const char* headers[] = {"% Calibrated Distance", "% Calibrated xVector", "% Calibrated yVector",
+                           "% Amplitude", "% Confidence map"};
+  for (int s = 0; s < 5; ++s) {
+    out << headers[s] << "\n";
+    for (int r = 0; r < h; ++r) {
+      for (int c = 0; c < w; ++c) {
+        // On the ray (u, v): x = a z, y = b z, and z = 1.5 + 0.4 x  ->  z = 1.5 / (1 - 0.4 a).
+        const double a = (c - cx) / fx, b = (r - cy) / fx;
+        const double z = (1.5 + z_shift_m) / (1.0 - 0.4 * a);
+        const double values[] = {z, a * z, b * z, 2000.0 + 10 * c, 30000.0 + r};
+        out << values[s] << (c + 1 < w ? "\t" : "\n");
+      }
+    }
+  }
+  out << "% additional data / time stamp [ms]\n" << stamp_ms;
+  for (int c = 1; c < w; ++c) out << "\tnan";
+  out << "\n";
+  return out.str();
+}
+
+TEST_F(ImportTest, MesaRealLayoutFolderGlobAndFile) {
+  const int w = 176, h = 144;
+  // Unpadded numbers: natural order must put frm_2 before frm_10.
+  for (int k = 1; k <= 10; ++k) {
+    std::ofstream(dir_ / ("frm_" + std::to_string(k) + ".dat"))
+        << RealLayoutMesaFrame(w, h, 5000.0 + 40.0 * k, 0.0);
+  }
+  std::ofstream(dir_ / "notes.txt") << "not a frame\n";
+  const ImportedSequence folder = ImportMesaDat(dir_);
+  ASSERT_EQ(folder.frames.size(), 10u);
+  for (std::size_t k = 0; k < 10; ++k) {
+    EXPECT_EQ(folder.frames[k].info.sequence, k);
+    EXPECT_EQ(folder.frames[k].info.timestamp_ns, static_cast<std::int64_t>(k) * 40'000'000);
+  }
+  EXPECT_EQ(ImportMesaDat(dir_ / "frm_1*.dat").frames.size(), 2u);  // frm_1, frm_10
+  EXPECT_EQ(ImportFromSpec("mesa-dat:" + (dir_ / "frm_3.dat").string()).frames.size(), 1u);
+  EXPECT_EQ(CodeOf([&] { (void)ImportMesaDat(dir_ / "nothing_*.dat"); }), ErrorCode::kNotFound);
+  EXPECT_EQ(CodeOf([&] { (void)ImportMesaDat(dir_ / "missing"); }), ErrorCode::kNotFound);
+
+  // Geometry: the intrinsics are fitted from x/z, y/z and every point of the pipeline's cloud
+  // lies on the plane z = 1.5 + 0.4 x (registers quantise the radial distance to L / 65536 =
+  // 0.08 mm, so 0.5 mm is generous).
+  const Frame& f = folder.frames[3];
+  EXPECT_NEAR(folder.camera.intrinsics.fx_px, 250.0, 1e-3);
+  EXPECT_NEAR(folder.camera.intrinsics.cx_px, 87.5, 1e-3);
+  EXPECT_NEAR(folder.camera.intrinsics.cy_px, 71.5, 1e-3);
+  ASSERT_FALSE(f.confidence.empty());
+  EXPECT_EQ(f.info.confidence_source, "MESA confidence map");
+  EXPECT_EQ(f.confidence(5, 7), 30005.0f);
+  PipelineOptions options;
+  options.filters.accuracy_enabled = false;
+  Pipeline pipeline(options, folder.camera);
+  const PipelineResult result = pipeline.Process(f);
+  int on_plane = 0;
+  for (std::size_t i = 0; i < result.cloud.size(); ++i) {
+    if (!std::isfinite(result.cloud.z[i])) continue;
+    EXPECT_NEAR(result.cloud.z[i], 1.5 + 0.4 * result.cloud.x[i], 5e-4) << "pixel " << i;
+    ++on_plane;
+  }
+  EXPECT_EQ(on_plane, w * h);
+}
+
+TEST_F(ImportTest, MesaConfidenceFilterRejectsWhatTheCameraDistrusts) {
+  // Confidence = 30000 + row: a threshold of 30100 rejects rows 0..99 exactly.
+  const std::string text = RealLayoutMesaFrame(176, 144, 0.0, 0.0);
+  const ImportedSequence seq = ParseMesaDat(text, "one.dat");
+  PipelineOptions options;
+  options.filters.accuracy_enabled = false;
+  options.filters.confidence_enabled = true;
+  options.filters.confidence.min_confidence = 30100.0;
+  Pipeline pipeline(options, seq.camera);
+  const PipelineResult result = pipeline.Process(seq.frames[0]);
+  for (int r = 0; r < 144; r += 7) {
+    for (int c = 0; c < 176; c += 11) {
+      EXPECT_EQ(result.frame.flags(r, c).Has(Flag::kLowConfidence), r < 100) << r << "," << c;
+      EXPECT_EQ(std::isfinite(result.cloud.z[r * 176 + c]), r >= 100);
+    }
+  }
+  // Without a confidence channel the filter has nothing to judge: no pixel flagged.
+  Frame bare = seq.frames[0];
+  bare.confidence = Image<float>();
+  const PipelineResult plain = pipeline.Process(bare);
+  for (std::size_t i = 0; i < plain.frame.flags.size(); ++i) {
+    ASSERT_FALSE(plain.frame.flags[i].Has(Flag::kLowConfidence));
+  }
+}
+
+TEST(MesaDat, RealLayoutErrorsNameTheProblem) {
+  auto message = [](const std::string& text) -> std::string {
+    try {
+      (void)ParseMesaDat(text, "frm.dat");
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::kFormat);
+      return e.what();
+    }
+    return "no error";
+  };
+  const std::string good = RealLayoutMesaFrame(4, 3, 12.0, 0.0);
+  EXPECT_EQ(message(good), "no error");
+  // A time stamp row of nothing but nan.
+  std::string no_stamp = good;
+  no_stamp.replace(no_stamp.rfind("12\t"), 2, "nan");
+  EXPECT_NE(message(no_stamp).find("expected a time stamp"), std::string::npos);
+  // Without the amplitude section.
+  std::string no_amp = good;
+  const std::size_t a = no_amp.find("% Amplitude"), b = no_amp.find("% Confidence map");
+  no_amp.erase(a, b - a);
+  EXPECT_NE(message(no_amp).find("no '% Amplitude' section"), std::string::npos);
+  // A section with one row too many.
+  std::string extra = good;
+  extra.insert(extra.find("% Amplitude"), "1\t2\t3\t4\n");
+  EXPECT_NE(message(extra).find("has 4 rows, expected 3"), std::string::npos);
 }
 
 // ------------------------------------------------------------------------------------------

@@ -66,6 +66,10 @@ Frame MakeFrame(const CameraInfo& cam, int index, bool flags, bool truth, std::m
     for (std::size_t i = 0; i < f.source_flags.size(); ++i) {
       f.source_flags[i] = PixelFlags(static_cast<std::uint16_t>(u16(rng)));
     }
+    // A camera's own confidence travels with its flags (the importers of real cameras).
+    f.confidence = Image<float>(w, h);
+    for (std::size_t i = 0; i < f.confidence.size(); ++i) f.confidence[i] = 0.25f * u16(rng);
+    f.info.confidence_source = "test confidence";
   }
   if (truth) {
     GroundTruth t;
@@ -97,6 +101,8 @@ void ExpectSameFrame(const Frame& a, const Frame& b) {
   EXPECT_EQ(a.amplitude, b.amplitude);
   EXPECT_EQ(a.intensity, b.intensity);
   EXPECT_EQ(a.source_flags, b.source_flags);
+  EXPECT_EQ(a.confidence, b.confidence);
+  EXPECT_EQ(a.info.confidence_source, b.info.confidence_source);
   ASSERT_EQ(a.truth.has_value(), b.truth.has_value());
   if (a.truth) {
     EXPECT_EQ(a.truth->radial_distance_m, b.truth->radial_distance_m);
@@ -147,6 +153,7 @@ TEST_P(RoundTrip, RecordThenPlayIsBitExact) {
   EXPECT_EQ(meta.camera.intrinsics.k1, 0.01);
   EXPECT_EQ(meta.camera.intrinsics.p2, -0.002);
   EXPECT_EQ(meta.has_source_flags, c.flags);
+  EXPECT_EQ(meta.has_confidence, c.flags);
   EXPECT_EQ(meta.has_ground_truth, c.truth);
   for (int i = 4; i >= 0; --i) ExpectSameFrame(reader.Read(static_cast<std::size_t>(i)), frames[i]);
 

@@ -25,6 +25,9 @@ struct FrameInfo {
   /// False when the source has no intensity (offset) channel; `Frame::intensity` then holds
   /// zeros and the accuracy model uses its amplitude-only form.
   bool has_intensity = true;
+  /// What `Frame::confidence` holds when it is not empty, one line (e.g. "MESA confidence map");
+  /// empty otherwise.
+  std::string confidence_source;
 };
 
 /// Ground truth a simulator attaches to each frame.
@@ -50,6 +53,12 @@ struct Frame {
   /// Per-pixel problems the camera itself reports (e.g. a real camera's confidence bits mapped to
   /// kInvalid / kSaturated); empty when the source reports none.
   Image<PixelFlags> source_flags;
+  /// The camera's own per-pixel confidence (MESA confidence map, ADI 255 - confidence byte, ...),
+  /// in the camera's units but oriented so that higher means more trustworthy; >= 0, finite.
+  /// Empty when the source gives none (simulator, most importers). FrameInfo::confidence_source
+  /// says what it is. The noise model (tofcam/accuracy/noise_model.h) and the confidence filter
+  /// (FilterSetOptions::min_confidence) read it.
+  Image<float> confidence;
   FrameInfo info;
   std::optional<GroundTruth> truth;  ///< Present only when the source is a simulator.
 
@@ -67,6 +76,8 @@ struct MetricFrame {
   Image<PixelFlags> flags;  ///< Problems found so far; see Flag.
   /// Predicted inaccuracy ΔL (m) per pixel (paper eq. 2); empty until the accuracy stage ran.
   Image<float> delta_l_m;
+  /// The camera's own confidence (Frame::confidence), copied; empty when the source has none.
+  Image<float> confidence;
   FrameInfo info;
   std::optional<GroundTruth> truth;
 

@@ -24,6 +24,9 @@ struct FilterSetOptions {
   SaturationOptions saturation;
   bool accuracy_enabled = true;
   AccuracyThresholdOptions accuracy;
+  /// The camera's own confidence channel; no effect on sources without one.
+  bool confidence_enabled = false;
+  ConfidenceThresholdOptions confidence;
   bool flying_pixel_enabled = false;
   FlyingPixelOptions flying_pixel;
   bool jump_edge_enabled = false;
@@ -36,7 +39,7 @@ struct FilterSetOptions {
 };
 
 /// Runs the enabled filters in this order: the per-pixel ones (range, amplitude, saturation,
-/// accuracy), then flying pixel, jump edge and Weingarten cells. Each neighbourhood filter sees
+/// accuracy, confidence), then flying pixel, jump edge and Weingarten cells. Each neighbourhood filter sees
 /// `frame.flags` plus everything raised before it as "already rejected", so it ignores those
 /// neighbours; the cell filter comes last because it counts the points that survived. Returns
 /// the union of the flags raised (not `frame.flags`); merge it with MergeFlags(). Throws like

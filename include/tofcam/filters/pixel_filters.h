@@ -78,4 +78,23 @@ struct RangeOptions {
 /// kOutOfRange where the radial distance is outside [min_distance_m, max_distance_m] or NaN.
 [[nodiscard]] Image<PixelFlags> RangeFilter(const MetricFrame& frame, const RangeOptions& options);
 
+/// The camera's own confidence channel (Frame::confidence: MESA confidence map, ADI confidence
+/// byte, ...) as a filter.
+struct ConfidenceThresholdOptions {
+  /// Pixels whose vendor confidence is below this value (camera units, oriented so that higher
+  /// is better) are rejected; [0, 1e9].
+  double min_confidence = 0.0;
+  void Validate() const;
+};
+
+/// kLowConfidence where `frame.confidence` < min_confidence or is NaN. A frame without a
+/// confidence channel (empty image) gets no flag: the filter has nothing to judge by.
+[[nodiscard]] Image<PixelFlags> ConfidenceThresholdFilter(
+    const MetricFrame& frame, const ConfidenceThresholdOptions& options);
+
+/// Same, OR-ing kLowConfidence into `out` (which must have the frame's size; untouched when the
+/// frame has no confidence channel).
+void ConfidenceThresholdInto(const MetricFrame& frame, const ConfidenceThresholdOptions& options,
+                             Image<PixelFlags>& out);
+
 }  // namespace tofcam

@@ -92,20 +92,32 @@ struct ImportedSequence {
 [[nodiscard]] CameraIntrinsics ParseAzureKinectCalibration(std::string_view json, int width,
                                                            int height, const std::string& name);
 
-/// MESA SwissRanger sample-viewer text export (`.dat`), see docs/importers.md for the assumed
-/// layout: per frame, five sections each headed by a '%' line (calibrated distance z (m), x (m),
-/// y (m), amplitude, confidence), each `height` lines of `width` numbers, then a timestamp line
-/// (last number on it, ms). Radial distance = sqrt(x^2 + y^2 + z^2); confidence 0 or a
-/// non-finite / non-positive distance -> kInvalid. Intrinsics are fitted to the x/z and y/z of
-/// the valid pixels (nominal SR-4000 values when fewer than 16 pixels are valid).
-[[nodiscard]] ImportedSequence ImportMesaDat(const std::filesystem::path& dat_file);
-/// Same from memory; `name` names the source in errors.
+/// MESA SwissRanger sample-viewer text export (`.dat`, docs/importers.md). Each file holds one
+/// frame (several in a row are accepted): sections headed by '%' lines, recognised by their
+/// words: `% Calibrated Distance` (z, m), `% Calibrated xVector` (x, m), `% Calibrated yVector`
+/// (y, m), `% Amplitude`, `% Confidence map` (optional) — each `height` rows of `width`
+/// tab-separated numbers — and `% additional data / time stamp [ms]`, whose one row starts with
+/// the time stamp (then nan padding; the older "% timestamp [ms]: 1234" header form is read too).
+/// Other '%' sections are skipped. Radial distance = sqrt(x^2 + y^2 + z^2); a non-finite or
+/// non-positive z, a non-finite x/y or confidence 0 -> kInvalid. The confidence map is kept as
+/// Frame::confidence. Intrinsics are fitted to the x/z and y/z of the first frame's valid pixels
+/// (nominal SR-4000 values when fewer than 16 are valid). `path` is a file, a folder (every
+/// `.dat` in it) or a file-name glob (`rec/frm_*.dat`); files are taken in natural order
+/// (frm_2 before frm_10) and time stamps are relative to the first frame of the first file.
+[[nodiscard]] ImportedSequence ImportMesaDat(const std::filesystem::path& path);
+/// One export from memory; `name` names the source in errors.
 [[nodiscard]] ImportedSequence ParseMesaDat(std::string_view text, const std::string& name);
+
+/// The files of a sequence: `path` itself when it is a file, the files ending in `extension`
+/// in it when it is a folder, or the files whose names match a glob ('*', '?') in the file-name
+/// part; sorted in natural order. Throws Error(kNotFound) when nothing matches.
+[[nodiscard]] std::vector<std::filesystem::path> ExpandSequencePath(
+    const std::filesystem::path& path, const std::string& extension);
 
 /// Imports by CLI spec "<format>:<path>": `ifm-o3d3xx:<file.h5>`, `adi-interleaved:<file.bin>`,
 /// `adi-raw:<depth.bin>[,<ir.bin>]` (default IR file: "depth" replaced by "ir" in the name),
 /// `azure-kinect:<dir>` (depth_640x576_u16le.bin, ir_640x576_u16le.bin, calibration.json) or
-/// `azure-kinect:<depth.bin>,<ir.bin>,<calibration.json>`, `mesa-dat:<file.dat>`.
+/// `azure-kinect:<depth.bin>,<ir.bin>,<calibration.json>`, `mesa-dat:<file.dat | folder | glob>`.
 /// Unknown formats are kInvalidArgument listing the known ones.
 [[nodiscard]] ImportedSequence ImportFromSpec(const std::string& spec);
 

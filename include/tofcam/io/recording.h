@@ -77,6 +77,7 @@ struct RecordingMetadata {
   std::string frame_camera_model;  ///< FrameInfo::camera_model of every frame.
   bool has_source_flags = false;   ///< Frames carry source_flags.
   bool has_ground_truth = false;   ///< Frames carry GroundTruth.
+  bool has_confidence = false;     ///< Frames carry the camera's confidence channel.
 };
 
 /// Random access to the frames of a recording. Opening reads and validates the metadata and the
