@@ -9,6 +9,7 @@
 
 #include "../filters/hot_loop.h"
 #include "../pipeline/stage_kernels.h"
+#include "temporal_sigma.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -95,7 +96,62 @@ TOFCAM_HOT_LOOP void DeltaLAmplitudeLoop(std::size_t n, float ka, const float* _
   }
 }
 
+// The fitted model: ln σ is a sum of per-channel terms; float logs and one exp per pixel.
+void ModelLoop(const NoiseModel& m, std::size_t n, const float* d, const float* a, const float* in,
+               const float* c, float* o) {
+  const float c0 = static_cast<float>(m.intercept), ca = static_cast<float>(m.log_amplitude);
+  const float ci = static_cast<float>(m.log_intensity), cr = static_cast<float>(m.log_distance);
+  const float cs = static_cast<float>(m.amplitude_fraction / m.amplitude_ref);
+  const float cc = static_cast<float>(m.log_confidence);
+  const bool use_i = in != nullptr && ci != 0.0f, use_r = cr != 0.0f;
+  const bool use_c = c != nullptr && cc != 0.0f;
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (std::size_t k = 0; k < n; ++k) {
+    const float ak = a[k];
+    if (!(ak > 0.0f)) {
+      o[k] = kInf;
+      continue;
+    }
+    float e = c0 + ca * std::log(ak) + cs * ak;
+    if (use_i) e += ci * std::log(std::max(in[k], 1.0f));
+    if (use_r) e += cr * std::log(std::max(d[k], 0.05f));
+    if (use_c) e += cc * std::log1p(std::max(c[k], 0.0f));
+    o[k] = std::exp(e);
+  }
+}
+
 }  // namespace
+
+void NoiseModel::Validate() const {
+  const std::pair<double, const char*> coefficients[] = {{intercept, "intercept"},
+                                                         {log_amplitude, "log_amplitude"},
+                                                         {log_intensity, "log_intensity"},
+                                                         {log_distance, "log_distance"},
+                                                         {amplitude_fraction, "amplitude_fraction"},
+                                                         {log_confidence, "log_confidence"}};
+  for (const auto& [value, name] : coefficients) {
+    if (!std::isfinite(value) || std::abs(value) > 1e3) {
+      throw Error(ErrorCode::kInvalidArgument, std::string("noise model ") + name + " = " +
+                                                   std::to_string(value) +
+                                                   " must be finite and within +-1e3");
+    }
+  }
+  if (!(amplitude_ref > 0.0) || !std::isfinite(amplitude_ref)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "noise model amplitude_ref = " + std::to_string(amplitude_ref) + " must be > 0");
+  }
+}
+
+double PredictSigmaM(const NoiseModel& m, double amplitude, double intensity, double distance_m,
+                     double confidence) {
+  if (!(amplitude > 0.0)) return std::numeric_limits<double>::infinity();
+  double e = m.intercept + m.log_amplitude * std::log(amplitude) +
+             m.amplitude_fraction * amplitude / m.amplitude_ref;
+  if (m.log_intensity != 0.0) e += m.log_intensity * std::log(std::max(intensity, 1.0));
+  if (m.log_distance != 0.0) e += m.log_distance * std::log(std::max(distance_m, 0.05));
+  if (m.log_confidence != 0.0) e += m.log_confidence * std::log1p(std::max(confidence, 0.0));
+  return std::exp(e);
+}
 
 namespace kernels {
 
@@ -112,11 +168,27 @@ DeltaLPlan PrepareDeltaL(const MetricFrame& frame, const AccuracyOptions& option
   plan.k = static_cast<float>(options.scale * range_m / (2.0 * std::sqrt(8.0)));
   plan.ka = plan.k * static_cast<float>(std::sqrt(options.intensity_per_amplitude));
   plan.has_intensity = frame.has_intensity();
+  if (options.model) {
+    options.model->Validate();
+    if (options.model->uses_intensity() && !frame.has_intensity()) {
+      throw Error(ErrorCode::kMismatch,
+                  "ComputeDeltaL: the noise model needs an intensity channel, the frame has none");
+    }
+    if (options.model->uses_confidence() && !frame.confidence.SameSize(w, h)) {
+      throw Error(ErrorCode::kMismatch,
+                  "ComputeDeltaL: the noise model needs the camera's confidence channel, the "
+                  "frame has none");
+    }
+    plan.model = &*options.model;
+  }
   return plan;
 }
 
-void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* a, const float* i, float* out) {
-  if (plan.has_intensity) {
+void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* d, const float* a,
+                const float* i, const float* c, float* out) {
+  if (plan.model != nullptr) {
+    ModelLoop(*plan.model, n, d, a, plan.has_intensity ? i : nullptr, c, out);
+  } else if (plan.has_intensity) {
     DeltaLLoop(n, plan.k, a, i, out);
   } else {
     DeltaLAmplitudeLoop(n, plan.ka, a, out);
@@ -128,8 +200,9 @@ void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* a, const flo
 void ComputeDeltaLInto(const MetricFrame& frame, const AccuracyOptions& options,
                        Image<float>& out) {
   const kernels::DeltaLPlan plan = kernels::PrepareDeltaL(frame, options, out);
-  kernels::DeltaLSpan(plan, out.size(), frame.amplitude.data(),
-                      frame.has_intensity() ? frame.intensity.data() : nullptr, out.data());
+  kernels::DeltaLSpan(plan, out.size(), frame.radial_distance_m.data(), frame.amplitude.data(),
+                      frame.has_intensity() ? frame.intensity.data() : nullptr,
+                      frame.confidence.empty() ? nullptr : frame.confidence.data(), out.data());
 }
 
 DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
@@ -162,36 +235,21 @@ DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
   for (const MetricFrame& f : frames) delta_l.push_back(ComputeDeltaL(f, accuracy));
 
   const double range_m = UnambiguousRangeM(f_hz);
-  const double to_rad = 2.0 * kPi / range_m;
   const std::size_t n_pix = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
   const double n_frames = static_cast<double>(frames.size());
   std::vector<double> sigma, dl;
   for (std::size_t i = 0; i < n_pix; ++i) {
+    double mean_dl = 0.0;
     bool ok = true;
-    double c = 0.0, s = 0.0, mean_dl = 0.0;
     for (std::size_t k = 0; k < frames.size() && ok; ++k) {
-      const MetricFrame& f = frames[k];
-      const double d = f.radial_distance_m[i];
-      ok = (f.flags.empty() || f.flags[i].Valid()) && std::isfinite(d) &&
-           std::isfinite(delta_l[k][i]);
-      c += std::cos(d * to_rad);
-      s += std::sin(d * to_rad);
+      ok = std::isfinite(delta_l[k][i]);
       mean_dl += delta_l[k][i];
     }
-    if (!ok) continue;
+    double pixel_sigma = 0.0;
+    if (!ok || !accuracy_internal::TemporalSigma(frames, i, range_m, pixel_sigma)) continue;
     mean_dl /= n_frames;
     if (!(mean_dl > 0.0)) continue;
-    // Deviations from the circular mean, wrapped into [-L/2, L/2): no jump at the 0 / L seam.
-    const double centre_m = std::atan2(s, c) / to_rad;
-    double sum = 0.0, sum2 = 0.0;
-    for (const MetricFrame& f : frames) {
-      double dev = f.radial_distance_m[i] - centre_m;
-      dev -= range_m * std::floor(dev / range_m + 0.5);
-      sum += dev;
-      sum2 += dev * dev;
-    }
-    const double var = (sum2 - sum * sum / n_frames) / (n_frames - 1.0);
-    sigma.push_back(std::sqrt(std::max(var, 0.0)));
+    sigma.push_back(pixel_sigma);
     dl.push_back(mean_dl);
   }
   // The cut needs the scale it is part of: a first, robust estimate (the median of σ / ΔL, which

@@ -95,7 +95,10 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
     kernels::ConvertSpan(metric, begin, len, cd, ca, ci, cf);
     if (s.calibration != nullptr)
       calibration_internal::CalibrateSpan(calibration, begin, len, cd, cf);
-    if (accuracy) kernels::DeltaLSpan(delta_l, len, ca, ci, cdl);
+    if (accuracy) {
+      const float* cc = m.confidence.empty() ? nullptr : m.confidence.data() + begin;
+      kernels::DeltaLSpan(delta_l, len, cd, ca, ci, cc, cdl);
+    }
     if (out.input_flags != nullptr) std::copy(cf, cf + len, out.input_flags->data() + begin);
     if (out.filter_flags != nullptr) {
       PixelFlags* raised = out.filter_flags->data() + begin;

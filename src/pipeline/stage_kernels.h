@@ -50,13 +50,16 @@ struct DeltaLPlan {
   float k = 0.0f;   // scale L / (2 sqrt 8)
   float ka = 0.0f;  // amplitude-only form: k sqrt(intensity_per_amplitude)
   bool has_intensity = true;
+  const NoiseModel* model = nullptr;  // set: the fitted model instead of eq. 2
 };
 
 // Validates options and frame, sizes `out`. Throws like ComputeDeltaLInto.
 [[nodiscard]] DeltaLPlan PrepareDeltaL(const MetricFrame& frame, const AccuracyOptions& options,
                                        Image<float>& out);
-// ΔL of n pixels from amplitude a and intensity i (unused in the amplitude-only form) into out.
-void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* a, const float* i, float* out);
+// ΔL of n pixels from amplitude a and intensity i (unused in the amplitude-only form) into out;
+// the fitted model also reads distance d and confidence c (nullptr when the frame has none).
+void DeltaLSpan(const DeltaLPlan& plan, std::size_t n, const float* d, const float* a,
+                const float* i, const float* c, float* out);
 
 // --- Stage 5: the per-pixel filters (src/filters/pixel_filters.cc) ----------------------------
 

@@ -12,11 +12,37 @@
 /// scale a noise calibration finds is 2 sqrt(g) / π for a camera whose registers count g units
 /// per electron (0.637 for g = 1). FitDeltaLScale measures it; see docs/calibration.md.
 
+#include <optional>
 #include <span>
 
 #include "tofcam/core/frame.h"
 
 namespace tofcam {
+
+/// A fitted per-camera noise model (tofcam/accuracy/noise_model.h, docs/noise_model.md):
+///   ln σ = c0 + c_A ln A + c_I ln I + c_r ln r + c_sat A / A_ref + c_C ln(1 + C). Coefficients are
+///   dimensionless except c0
+/// (ln of metres).
+struct NoiseModel {
+  double intercept = 0.0;           ///< c0.
+  double log_amplitude = 0.0;       ///< c_A, slope in ln A.
+  double log_intensity = 0.0;       ///< c_I, slope in ln I; non-zero needs an intensity channel.
+  double log_distance = 0.0;        ///< c_r, slope in ln r (r in m, floored at 0.05 m).
+  double amplitude_fraction = 0.0;  ///< c_sat, slope in A / amplitude_ref (saturation proximity).
+  double amplitude_ref = 1.0;       ///< A_ref, register units, > 0 (the fit's 99th percentile).
+  double log_confidence = 0.0;  ///< c_C, slope in ln(1 + C); non-zero needs a confidence channel.
+
+  [[nodiscard]] bool uses_intensity() const noexcept { return log_intensity != 0.0; }
+  [[nodiscard]] bool uses_confidence() const noexcept { return log_confidence != 0.0; }
+  /// Throws Error(kInvalidArgument) naming the field unless every value is finite, every
+  /// coefficient within ±1e3 and amplitude_ref > 0.
+  void Validate() const;
+};
+
+/// Predicted σ (m) of one pixel. Amplitude <= 0 or NaN gives +inf (as eq. 2); intensity is
+/// floored at 1, distance at 0.05 m, confidence at 0.
+[[nodiscard]] double PredictSigmaM(const NoiseModel& model, double amplitude, double intensity,
+                                   double distance_m, double confidence);
 
 struct AccuracyOptions {
   /// Multiplies eq. 2; 1 is the paper's formula, FitDeltaLScale() measures the camera's value.
@@ -28,16 +54,21 @@ struct AccuracyOptions {
   /// background light; background raises the true ratio, so the form is optimistic under lamps
   /// or sunlight. Valid range (0, 1e6].
   double intensity_per_amplitude = 2.5;
+  /// When set, ΔL is this model's predicted σ (m) instead of eq. 2 (scale and
+  /// intensity_per_amplitude are then unused). From `tofcam calibrate --noise`.
+  std::optional<NoiseModel> model;
 
   /// Throws Error(kInvalidArgument) naming the field when a value is out of range or not finite.
   void Validate() const;
 };
 
 /// ΔL in metres per pixel (eq. 2, times options.scale), with L of the frame's modulation
-/// frequency. Pixels with A <= 0 (or NaN) get +inf; intensities below 0 count as 0. Flags are not
-/// read or changed: invalid pixels get the value of the formula too (the threshold filter reads
-/// flags and ΔL together). Uses the amplitude-only form when `!frame.has_intensity()`.
-/// Throws Error(kInvalidArgument) for bad options, an empty frame or channels of different sizes.
+/// frequency; or options.model's σ when a model is set (Error(kMismatch) when it needs an
+/// intensity or confidence channel the frame lacks). Pixels with A <= 0 (or NaN) get +inf;
+/// intensities below 0 count as 0. Flags are not read or changed: invalid pixels get the value of
+/// the formula too (the threshold filter reads flags and ΔL together). Uses the amplitude-only form
+/// when `!frame.has_intensity()`. Throws Error(kInvalidArgument) for bad options, an empty frame or
+/// channels of different sizes.
 [[nodiscard]] Image<float> ComputeDeltaL(const MetricFrame& frame,
                                          const AccuracyOptions& options = {});
 

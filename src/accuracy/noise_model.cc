@@ -1,0 +1,352 @@
+#include "tofcam/accuracy/noise_model.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "temporal_sigma.h"
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+namespace {
+
+[[noreturn]] void Bad(const std::string& what) { throw Error(ErrorCode::kInvalidArgument, what); }
+
+// One usable pixel: its measured σ and the per-pixel temporal means of its channels.
+struct PixelSample {
+  double sigma_m, amplitude, intensity, distance_m, confidence, eq2_m;
+  bool training;
+};
+
+// Feature vector of the model: [1, ln A, ln I, ln r, A / A_ref, ln(1 + C)], the columns in
+// `use` only.
+struct Features {
+  bool intensity = false, distance = false, saturation = false, confidence = false;
+  double amplitude_ref = 1.0;
+
+  [[nodiscard]] int count() const {
+    return 2 + int{intensity} + int{distance} + int{saturation} + int{confidence};
+  }
+  void Row(const PixelSample& p, double* out) const {
+    int k = 0;
+    out[k++] = 1.0;
+    out[k++] = std::log(p.amplitude);
+    if (intensity) out[k++] = std::log(std::max(p.intensity, 1.0));
+    if (distance) out[k++] = std::log(std::max(p.distance_m, 0.05));
+    if (saturation) out[k++] = p.amplitude / amplitude_ref;
+    if (confidence) out[k++] = std::log1p(std::max(p.confidence, 0.0));
+  }
+  [[nodiscard]] NoiseModel ToModel(const Eigen::VectorXd& beta) const {
+    NoiseModel m;
+    int k = 0;
+    m.intercept = beta[k++];
+    m.log_amplitude = beta[k++];
+    if (intensity) m.log_intensity = beta[k++];
+    if (distance) m.log_distance = beta[k++];
+    if (saturation) m.amplitude_fraction = beta[k++];
+    if (confidence) m.log_confidence = beta[k++];
+    m.amplitude_ref = amplitude_ref;
+    return m;
+  }
+  [[nodiscard]] std::string Names() const {
+    std::string s = "ln A";
+    if (intensity) s += ", ln I";
+    if (distance) s += ", ln r";
+    if (saturation) s += ", A/A_ref";
+    if (confidence) s += ", ln(1+C)";
+    return s;
+  }
+};
+
+// Least squares of y on the features of `rows`, with the features standardised and a ridge of
+// 1e-4 per sample on the standardised slopes (not the intercept): a channel that barely varies
+// (distance on a flat wall) then keeps a small slope instead of an arbitrary one.
+NoiseModel FitLogLinear(const std::vector<const PixelSample*>& rows, const std::vector<double>& y,
+                        const Features& features) {
+  const int p = features.count();
+  const Eigen::Index n = static_cast<Eigen::Index>(rows.size());
+  Eigen::MatrixXd x(n, p);
+  std::vector<double> row(static_cast<std::size_t>(p));
+  for (Eigen::Index r = 0; r < n; ++r) {
+    features.Row(*rows[static_cast<std::size_t>(r)], row.data());
+    for (int c = 0; c < p; ++c) x(r, c) = row[static_cast<std::size_t>(c)];
+  }
+  Eigen::VectorXd mean = x.colwise().mean();
+  Eigen::VectorXd scale = Eigen::VectorXd::Ones(p);
+  for (int c = 1; c < p; ++c) {
+    const double sd = std::sqrt((x.col(c).array() - mean[c]).square().mean());
+    scale[c] = sd > 1e-12 ? sd : 1.0;
+    x.col(c) = (x.col(c).array() - mean[c]) / scale[c];
+  }
+  Eigen::VectorXd yy(n);
+  for (Eigen::Index r = 0; r < n; ++r) yy[r] = y[static_cast<std::size_t>(r)];
+  Eigen::MatrixXd a = x.transpose() * x;
+  for (int c = 1; c < p; ++c) a(c, c) += 1e-4 * static_cast<double>(n);
+  const Eigen::VectorXd b = a.ldlt().solve(x.transpose() * yy);
+  // Back to the raw features: slope_c = b_c / scale_c, intercept absorbs the means.
+  Eigen::VectorXd beta(p);
+  beta[0] = b[0];
+  for (int c = 1; c < p; ++c) {
+    beta[c] = b[c] / scale[c];
+    beta[0] -= beta[c] * mean[c];
+  }
+  return features.ToModel(beta);
+}
+
+std::vector<double> Ranks(std::span<const double> v) {
+  std::vector<std::size_t> idx(v.size());
+  std::iota(idx.begin(), idx.end(), std::size_t{0});
+  std::sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) { return v[a] < v[b]; });
+  std::vector<double> r(v.size());
+  for (std::size_t i = 0; i < idx.size();) {
+    std::size_t j = i;
+    while (j < idx.size() && v[idx[j]] == v[idx[i]]) ++j;
+    for (std::size_t k = i; k < j; ++k) r[idx[k]] = 0.5 * static_cast<double>(i + j - 1);
+    i = j;
+  }
+  return r;
+}
+
+// Rank and decile calibration of `predicted` against the measured σ of `pixels`.
+PredictorValidation Validate(const std::string& name, const std::vector<double>& predicted,
+                             const std::vector<const PixelSample*>& pixels, bool calibrated) {
+  PredictorValidation v;
+  v.name = name;
+  v.available = true;
+  v.calibrated = calibrated;
+  std::vector<double> measured(pixels.size());
+  for (std::size_t i = 0; i < pixels.size(); ++i) measured[i] = pixels[i]->sigma_m;
+  v.spearman = SpearmanCorrelation(predicted, measured);
+  if (!calibrated) return v;
+  std::vector<std::size_t> order(pixels.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return predicted[a] < predicted[b]; });
+  const std::size_t n = order.size();
+  for (std::size_t d = 0; d < 10; ++d) {
+    const std::size_t lo = d * n / 10, hi = (d + 1) * n / 10;
+    double p2 = 0.0, m2 = 0.0;
+    for (std::size_t k = lo; k < hi; ++k) {
+      p2 += predicted[order[k]] * predicted[order[k]];
+      m2 += measured[order[k]] * measured[order[k]];
+    }
+    const double count = static_cast<double>(std::max<std::size_t>(hi - lo, 1));
+    v.predicted_m[d] = std::sqrt(p2 / count);
+    v.measured_m[d] = std::sqrt(m2 / count);
+    if (v.measured_m[d] > 0.0) {
+      v.max_decile_error =
+          std::max(v.max_decile_error, std::abs(v.predicted_m[d] / v.measured_m[d] - 1.0));
+    }
+  }
+  return v;
+}
+
+// σ = s ΔL through the origin, in variances (unbiased): s² = Σ σ² ΔL² / Σ ΔL⁴.
+double Eq2Scale(const std::vector<const PixelSample*>& pixels) {
+  double num = 0.0, den = 0.0;
+  for (const PixelSample* p : pixels) {
+    num += p->sigma_m * p->sigma_m * p->eq2_m * p->eq2_m;
+    den += p->eq2_m * p->eq2_m * p->eq2_m * p->eq2_m;
+  }
+  return den > 0.0 ? std::sqrt(num / den) : 1.0;
+}
+
+// The least squares of ln σ predicts the geometric mean of σ; scatter the model does not
+// explain makes that fall short of σ's RMS, which the filter's threshold is about. One shift of
+// c0 makes Σ predicted² = Σ s² over `rows` (s² is an unbiased estimate of σ²).
+void MatchVariance(NoiseModel& m, const std::vector<const PixelSample*>& rows) {
+  double pred2 = 0.0, meas2 = 0.0;
+  for (const PixelSample* p : rows) {
+    const double q = PredictSigmaM(m, p->amplitude, p->intensity, p->distance_m, p->confidence);
+    pred2 += q * q;
+    meas2 += p->sigma_m * p->sigma_m;
+  }
+  if (pred2 > 0.0 && meas2 > 0.0 && std::isfinite(pred2))
+    m.intercept += 0.5 * std::log(meas2 / pred2);
+}
+
+double Percentile(std::vector<double> v, double q) {
+  const std::size_t k = static_cast<std::size_t>(q * static_cast<double>(v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+}  // namespace
+
+double SpearmanCorrelation(std::span<const double> a, std::span<const double> b) {
+  if (a.size() != b.size() || a.size() < 2) return 0.0;
+  const std::vector<double> ra = Ranks(a), rb = Ranks(b);
+  const double n = static_cast<double>(a.size());
+  const double mean = 0.5 * (n - 1.0);
+  double sab = 0.0, saa = 0.0, sbb = 0.0;
+  for (std::size_t i = 0; i < ra.size(); ++i) {
+    sab += (ra[i] - mean) * (rb[i] - mean);
+    saa += (ra[i] - mean) * (ra[i] - mean);
+    sbb += (rb[i] - mean) * (rb[i] - mean);
+  }
+  return saa > 0.0 && sbb > 0.0 ? sab / std::sqrt(saa * sbb) : 0.0;
+}
+
+void NoiseModelFitOptions::Validate() const {
+  if (min_frames < 3 || min_frames > 1000000) {
+    Bad("noise model option min_frames = " + std::to_string(min_frames) + " must be in [3, 1e6]");
+  }
+  if (min_pixels < 10 || min_pixels > (1 << 28)) {
+    Bad("noise model option min_pixels = " + std::to_string(min_pixels) + " must be in [10, 2^28]");
+  }
+  if (block_px < 1 || block_px > 4096) {
+    Bad("noise model option block_px = " + std::to_string(block_px) + " must be in [1, 4096]");
+  }
+  if (!(max_sigma_fraction_of_range > 0.0)) {
+    Bad("noise model option max_sigma_fraction_of_range = " +
+        std::to_string(max_sigma_fraction_of_range) + " must be > 0");
+  }
+  AccuracyOptions a = accuracy;
+  a.scale = 1.0;
+  a.model.reset();
+  a.Validate();
+}
+
+NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
+                            const NoiseModelFitOptions& options) {
+  options.Validate();
+  if (frames.size() < static_cast<std::size_t>(options.min_frames)) {
+    Bad("noise model fit needs at least " + std::to_string(options.min_frames) +
+        " static frames, got " + std::to_string(frames.size()));
+  }
+  const MetricFrame& first = frames.front();
+  const int w = first.width(), h = first.height();
+  const double f_hz = first.info.modulation_frequency_hz;
+  if (w <= 0 || h <= 0) Bad("noise model fit: empty frame");
+  bool has_intensity = true, has_confidence = true;
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const MetricFrame& f = frames[k];
+    const std::string what = "noise model fit frame " + std::to_string(k);
+    if (f.width() != w || f.height() != h || !f.amplitude.SameSize(w, h) ||
+        (!f.flags.empty() && !f.flags.SameSize(w, h))) {
+      Bad(what + ": size differs from frame 0");
+    }
+    if (f.info.modulation_frequency_hz != f_hz) Bad(what + ": modulation frequency differs");
+    has_intensity = has_intensity && f.has_intensity() && f.intensity.SameSize(w, h);
+    has_confidence = has_confidence && f.confidence.SameSize(w, h);
+  }
+  if (!std::isfinite(f_hz) || f_hz <= 0.0) Bad("noise model fit: modulation frequency must be > 0");
+  const double range_m = UnambiguousRangeM(f_hz);
+  // Eq. 2 (scale 1) of the mean channels: the baseline and the predictor the cut is made on.
+  AccuracyOptions eq2 = options.accuracy;
+  eq2.scale = 1.0;
+  eq2.model.reset();
+  const double k_eq2 = range_m / (2.0 * std::sqrt(8.0));
+
+  const double n = static_cast<double>(frames.size());
+  std::vector<PixelSample> samples;
+  for (int r = 0; r < h; ++r) {
+    for (int c = 0; c < w; ++c) {
+      const std::size_t i =
+          static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(c);
+      PixelSample p{};
+      if (!accuracy_internal::TemporalSigma(frames, i, range_m, p.sigma_m)) continue;
+      bool ok = true;
+      for (const MetricFrame& f : frames) {
+        ok = ok && std::isfinite(f.amplitude[i]);
+        p.amplitude += f.amplitude[i];
+        p.distance_m += f.radial_distance_m[i];
+        if (has_intensity) p.intensity += f.intensity[i];
+        if (has_confidence) p.confidence += f.confidence[i];
+      }
+      p.amplitude /= n;
+      p.intensity /= n;
+      p.distance_m /= n;
+      p.confidence /= n;
+      if (!ok || !(p.amplitude > 0.0) || !std::isfinite(p.confidence)) continue;
+      const double i_eff =
+          has_intensity ? std::max(p.intensity, 0.0) : eq2.intensity_per_amplitude * p.amplitude;
+      p.eq2_m = k_eq2 * std::sqrt(i_eff) / p.amplitude;
+      p.training = ((r / options.block_px) + (c / options.block_px)) % 2 == 0;
+      samples.push_back(p);
+    }
+  }
+  // The cut on the predictor (see the option): median σ / ΔL first.
+  if (!samples.empty() && std::isfinite(options.max_sigma_fraction_of_range)) {
+    std::vector<double> ratio;
+    ratio.reserve(samples.size());
+    for (const PixelSample& p : samples) ratio.push_back(p.sigma_m / p.eq2_m);
+    const double median = Percentile(ratio, 0.5);
+    if (median > 0.0) {
+      const double max_eq2 = options.max_sigma_fraction_of_range * range_m / median;
+      std::erase_if(samples, [&](const PixelSample& p) { return !(p.eq2_m <= max_eq2); });
+    }
+  }
+  std::vector<const PixelSample*> train, test, all;
+  for (const PixelSample& p : samples) {
+    (p.training ? train : test).push_back(&p);
+    all.push_back(&p);
+  }
+  if (train.size() < static_cast<std::size_t>(options.min_pixels) ||
+      test.size() < static_cast<std::size_t>(options.min_pixels)) {
+    Bad("noise model fit: " + std::to_string(train.size()) + " training and " +
+        std::to_string(test.size()) + " held-out pixels usable in every frame, need " +
+        std::to_string(options.min_pixels) + " each (is the scene static and lit?)");
+  }
+
+  // ln s of N frames is biased low against ln σ; only the intercept absorbs that, and
+  // MatchVariance sets the intercept. s = 0 (identical readings, a quantised camera) is floored
+  // at the register step / sqrt(12), the quantisation noise.
+  const double floor_m = range_m / kDistanceRegisterSpan / std::sqrt(12.0);
+  auto targets = [&](const std::vector<const PixelSample*>& rows) {
+    std::vector<double> y(rows.size());
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      y[i] = std::log(std::max(rows[i]->sigma_m, floor_m));
+    }
+    return y;
+  };
+  Features features;
+  features.intensity = options.use_intensity && has_intensity;
+  features.distance = options.use_distance;
+  features.saturation = options.use_saturation;
+  features.confidence = options.use_confidence && has_confidence;
+  {
+    std::vector<double> amplitudes;
+    for (const PixelSample* p : train) amplitudes.push_back(p->amplitude);
+    features.amplitude_ref = std::max(Percentile(amplitudes, 0.99), 1e-9);
+  }
+
+  NoiseModelFit fit;
+  fit.frames = static_cast<int>(frames.size());
+  fit.training_pixels = static_cast<int>(train.size());
+  fit.held_out_pixels = static_cast<int>(test.size());
+  fit.features = features.Names();
+
+  // Held-out validation: every predictor fitted (where it has parameters) on the training half.
+  NoiseModel trained = FitLogLinear(train, targets(train), features);
+  MatchVariance(trained, train);
+  const double trained_scale = Eq2Scale(train);
+  std::vector<double> model_pred, eq2_pred, vendor_pred;
+  for (const PixelSample* p : test) {
+    model_pred.push_back(
+        PredictSigmaM(trained, p->amplitude, p->intensity, p->distance_m, p->confidence));
+    eq2_pred.push_back(trained_scale * p->eq2_m);
+    vendor_pred.push_back(-p->confidence);
+  }
+  fit.fitted = Validate("fitted model", model_pred, test, true);
+  fit.eq2 = Validate("eq. 2", eq2_pred, test, true);
+  if (has_confidence) {
+    fit.vendor = Validate("vendor confidence", vendor_pred, test, false);
+  } else {
+    fit.vendor.name = "vendor confidence";
+  }
+
+  // The stored model and scale use every pixel.
+  fit.model = FitLogLinear(all, targets(all), features);
+  MatchVariance(fit.model, all);
+  fit.eq2_scale = Eq2Scale(all);
+  fit.model.Validate();
+  return fit;
+}
+
+}  // namespace tofcam
