@@ -112,6 +112,12 @@ int main(int argc, char** argv) {
     WriteFileAtomically(out / "fuzz_mesa_dat" / "tiny.dat",
                         "% distance\n0.6 1.2\n2.0 nan\n% x\n0 0\n0 0\n% y\n0.8 1.6\n0 0\n"
                         "% amplitude\n100 200\n300 400\n% confidence\n1 1\n1 0\n% time: 15\n");
+    // The real sample-viewer layout (issue 14): tabs, named sections, a nan-padded stamp row.
+    WriteFileAtomically(out / "fuzz_mesa_dat" / "real_layout.dat",
+                        "% Calibrated Distance\n0.6\t1.2\n2.0\tnan\n% Calibrated xVector\n0\t0\n"
+                        "0\t0\n% Calibrated yVector\n0.8\t1.6\n0\t0\n% Amplitude\n100\t200\n"
+                        "300\t400\n% Confidence map\n1\t1\n1\t0\n"
+                        "% additional data / time stamp [ms]\n12345\tnan\n");
   } catch (const Error& e) {
     std::fprintf(stderr, "fuzz_seed_writer: %s\n", e.what());
     return 1;

@@ -93,12 +93,22 @@ void RunNoiseCalibration(Camera& camera, OffsetCalibration& calibration, int fra
   NoiseCalibrationOptions options;
   options.frames = frames;
   DeltaLScaleFit fit;
-  calibration.noise = CalibrateNoise(camera, options, Progress, &fit);
+  NoiseModelReport model;
+  calibration.noise = CalibrateNoise(camera, options, Progress, &fit, &model);
   std::printf(
       "noise calibration: sigma = %.4g x dL of eq. 2 (median sigma/dL %.4g, R^2 %.3f, %d "
       "pixels, %d static frames at register %d)\n",
       fit.scale, fit.median_ratio, fit.r_squared, fit.pixels_used, fit.frames,
       camera.IntegrationTimeRegister());
+  if (model.fit) {
+    const NoiseModelFit& m = *model.fit;
+    std::printf(
+        "noise model (%s): held-out Spearman rho %.3f (eq. 2 %.3f), largest decile error "
+        "%.0f %% (eq. 2 %.0f %%) on %d held-out pixels\n",
+        m.features.c_str(), m.fitted.spearman, m.eq2.spearman, 100 * m.fitted.max_decile_error,
+        100 * m.eq2.max_decile_error, m.held_out_pixels);
+  }
+  std::printf("noise model %s\n", model.note.c_str());
 }
 
 // The camera of --setpoint, opened and checked before any long phase runs, so that a camera
@@ -404,7 +414,8 @@ void SetupCalibrateCommand(CLI::App& app) {
                   "Frames per integration time for the exposure offset (0 = do not measure)")
       ->capture_default_str();
   sub->add_flag("--noise", o->noise,
-                "Noise calibration of eq. 2 from static frames of --camera (stored in --out)");
+                "Noise calibration from static frames of --camera: eq. 2's scale and, with >= 4 "
+                "frames, a fitted noise model (docs/noise_model.md; stored in --out)");
   sub->add_option("--noise-frames", o->noise_frames, "Static frames for --noise (3..100000)")
       ->capture_default_str();
   sub->add_flag("--setpoint", o->setpoint,

@@ -146,6 +146,8 @@ void BindInfo(py::module_& m) {
       .def_readwrite("camera_model", &FrameInfo::camera_model, "Model name, e.g. 'SR-2'.")
       .def_readwrite("has_intensity", &FrameInfo::has_intensity,
                      "False when the source has no intensity (offset) channel.")
+      .def_readwrite("confidence_source", &FrameInfo::confidence_source,
+                     "What Frame.confidence holds, one line; empty without it.")
       .def("__repr__", [](const FrameInfo& i) {
         return Repr("FrameInfo",
                     {"sequence=" + std::to_string(i.sequence),
@@ -298,6 +300,9 @@ void BindFrames(py::module_& m) {
           "uint16 (H, W): intensity (offset) register; zeros when info.has_intensity is False.");
   Channel(frame, "source_flags", &Frame::source_flags,
           "uint16 (H, W): problems the camera itself reports, or None.");
+  Channel(frame, "confidence", &Frame::confidence,
+          "float32 (H, W): the camera's own confidence (higher = better; MESA map, ADI byte), "
+          "or None; info.confidence_source says what it is.");
   frame.def_readwrite("info", &Frame::info)
       .def_property_readonly(
           "truth",
@@ -355,6 +360,8 @@ void BindFrames(py::module_& m) {
   Channel(metric, "flags", &MetricFrame::flags, "uint16 (H, W): Flag bits per pixel.");
   Channel(metric, "delta_l_m", &MetricFrame::delta_l_m,
           "float32 (H, W): predicted inaccuracy ΔL (eq. 2), m; None until computed.");
+  Channel(metric, "confidence", &MetricFrame::confidence,
+          "float32 (H, W): the camera's own confidence (Frame.confidence), or None.");
   metric.def_readwrite("info", &MetricFrame::info)
       .def_property_readonly(
           "truth",

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,23 +21,36 @@ namespace {
 // One usable pixel: its measured σ and the per-pixel temporal means of its channels.
 struct PixelSample {
   double sigma_m, amplitude, intensity, distance_m, confidence, eq2_m;
-  bool training;
+  bool training;   // in the training half (else held out)
+  bool selection;  // training pixel that scores the choice of channels
 };
 
-// Feature vector of the model: [1, ln A, ln I, ln r, A / A_ref, ln(1 + C)], the columns in
-// `use` only.
+// The model's channels. The base is either eq. 2's slopes held fixed (ln σ = c0 + ln ΔL of
+// eq. 2 + extras; eq2_base) or free slopes in ln A (and ln I where present); the extras are the
+// optional channels. Columns: [1, (ln A, ln I when free), ln r, A / A_ref, ln(1 + C)].
 struct Features {
-  bool intensity = false, distance = false, saturation = false, confidence = false;
+  bool eq2_base = false;
+  bool has_intensity = false;  // the frames have an intensity channel
+  double intensity_per_amplitude = 2.5;
+  bool distance = false, saturation = false, confidence = false;
   double amplitude_ref = 1.0;
 
+  [[nodiscard]] bool free_intensity() const { return !eq2_base && has_intensity; }
   [[nodiscard]] int count() const {
-    return 2 + int{intensity} + int{distance} + int{saturation} + int{confidence};
+    return 1 + (eq2_base ? 0 : 1) + int{free_intensity()} + int{distance} + int{saturation} +
+           int{confidence};
+  }
+  // The fixed part of ln σ (eq. 2's slopes), 0 with free slopes.
+  [[nodiscard]] double Offset(const PixelSample& p) const {
+    if (!eq2_base) return 0.0;
+    return has_intensity ? 0.5 * std::log(std::max(p.intensity, 1.0)) - std::log(p.amplitude)
+                         : -0.5 * std::log(p.amplitude);
   }
   void Row(const PixelSample& p, double* out) const {
     int k = 0;
     out[k++] = 1.0;
-    out[k++] = std::log(p.amplitude);
-    if (intensity) out[k++] = std::log(std::max(p.intensity, 1.0));
+    if (!eq2_base) out[k++] = std::log(p.amplitude);
+    if (free_intensity()) out[k++] = std::log(std::max(p.intensity, 1.0));
     if (distance) out[k++] = std::log(std::max(p.distance_m, 0.05));
     if (saturation) out[k++] = p.amplitude / amplitude_ref;
     if (confidence) out[k++] = std::log1p(std::max(p.confidence, 0.0));
@@ -45,8 +59,15 @@ struct Features {
     NoiseModel m;
     int k = 0;
     m.intercept = beta[k++];
-    m.log_amplitude = beta[k++];
-    if (intensity) m.log_intensity = beta[k++];
+    if (eq2_base) {
+      // ln of eq. 2's amplitude-only form: 0.5 ln(k_I A) - ln A; the constant goes to c0.
+      m.log_amplitude = has_intensity ? -1.0 : -0.5;
+      m.log_intensity = has_intensity ? 0.5 : 0.0;
+      if (!has_intensity) m.intercept += 0.5 * std::log(intensity_per_amplitude);
+    } else {
+      m.log_amplitude = beta[k++];
+      if (free_intensity()) m.log_intensity = beta[k++];
+    }
     if (distance) m.log_distance = beta[k++];
     if (saturation) m.amplitude_fraction = beta[k++];
     if (confidence) m.log_confidence = beta[k++];
@@ -54,8 +75,7 @@ struct Features {
     return m;
   }
   [[nodiscard]] std::string Names() const {
-    std::string s = "ln A";
-    if (intensity) s += ", ln I";
+    std::string s = eq2_base ? "eq. 2 slopes" : (free_intensity() ? "ln A, ln I" : "ln A");
     if (distance) s += ", ln r";
     if (saturation) s += ", A/A_ref";
     if (confidence) s += ", ln(1+C)";
@@ -63,18 +83,21 @@ struct Features {
   }
 };
 
-// Least squares of y on the features of `rows`, with the features standardised and a ridge of
-// 1e-4 per sample on the standardised slopes (not the intercept): a channel that barely varies
-// (distance on a flat wall) then keeps a small slope instead of an arbitrary one.
+// Least squares of y - offset on the features of `rows`, with the features standardised and a
+// ridge of 1e-4 per sample on the standardised slopes (not the intercept): a channel that
+// barely varies (distance on a flat wall) then keeps a small slope instead of an arbitrary one.
 NoiseModel FitLogLinear(const std::vector<const PixelSample*>& rows, const std::vector<double>& y,
                         const Features& features) {
   const int p = features.count();
   const Eigen::Index n = static_cast<Eigen::Index>(rows.size());
   Eigen::MatrixXd x(n, p);
+  Eigen::VectorXd yy(n);
   std::vector<double> row(static_cast<std::size_t>(p));
   for (Eigen::Index r = 0; r < n; ++r) {
-    features.Row(*rows[static_cast<std::size_t>(r)], row.data());
+    const PixelSample& sample = *rows[static_cast<std::size_t>(r)];
+    features.Row(sample, row.data());
     for (int c = 0; c < p; ++c) x(r, c) = row[static_cast<std::size_t>(c)];
+    yy[r] = y[static_cast<std::size_t>(r)] - features.Offset(sample);
   }
   Eigen::VectorXd mean = x.colwise().mean();
   Eigen::VectorXd scale = Eigen::VectorXd::Ones(p);
@@ -83,8 +106,6 @@ NoiseModel FitLogLinear(const std::vector<const PixelSample*>& rows, const std::
     scale[c] = sd > 1e-12 ? sd : 1.0;
     x.col(c) = (x.col(c).array() - mean[c]) / scale[c];
   }
-  Eigen::VectorXd yy(n);
-  for (Eigen::Index r = 0; r < n; ++r) yy[r] = y[static_cast<std::size_t>(r)];
   Eigen::MatrixXd a = x.transpose() * x;
   for (int c = 1; c < p; ++c) a(c, c) += 1e-4 * static_cast<double>(n);
   const Eigen::VectorXd b = a.ldlt().solve(x.transpose() * yy);
@@ -267,7 +288,9 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
       const double i_eff =
           has_intensity ? std::max(p.intensity, 0.0) : eq2.intensity_per_amplitude * p.amplitude;
       p.eq2_m = k_eq2 * std::sqrt(i_eff) / p.amplitude;
-      p.training = ((r / options.block_px) + (c / options.block_px)) % 2 == 0;
+      const int bx = c / options.block_px, by = r / options.block_px;
+      p.training = (bx + by) % 2 == 0;
+      p.selection = p.training && bx % 2 == 1;
       samples.push_back(p);
     }
   }
@@ -305,16 +328,65 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
     }
     return y;
   };
-  Features features;
-  features.intensity = options.use_intensity && has_intensity;
-  features.distance = options.use_distance;
-  features.saturation = options.use_saturation;
-  features.confidence = options.use_confidence && has_confidence;
+  // Channels are chosen on the training half alone, split again into a fitting and a selection
+  // part, so the held-out pixels judge a choice they took no part in.
+  std::vector<const PixelSample*> fit_part, select_part;
+  for (const PixelSample* p : train) (p->selection ? select_part : fit_part).push_back(p);
+  Features base;
+  base.has_intensity = has_intensity;
+  base.intensity_per_amplitude = eq2.intensity_per_amplitude;
   {
     std::vector<double> amplitudes;
     for (const PixelSample* p : train) amplitudes.push_back(p->amplitude);
-    features.amplitude_ref = std::max(Percentile(amplitudes, 0.99), 1e-9);
+    base.amplitude_ref = std::max(Percentile(amplitudes, 0.99), 1e-9);
   }
+  struct Scored {
+    Features features;
+    PredictorValidation v;
+  };
+  auto score = [&](const Features& f) {
+    NoiseModel m = FitLogLinear(fit_part, targets(fit_part), f);
+    MatchVariance(m, fit_part);
+    std::vector<double> pred;
+    for (const PixelSample* p : select_part) {
+      pred.push_back(PredictSigmaM(m, p->amplitude, p->intensity, p->distance_m, p->confidence));
+    }
+    return Scored{f, Validate("", pred, select_part, true)};
+  };
+  // Better: a higher ρ beyond 2 standard errors, or a ρ within them and a smaller worst decile.
+  const double n_select = static_cast<double>(select_part.size());
+  auto better = [&](const Scored& a, const Scored& b) {
+    const double rho = b.v.spearman;
+    const double se =
+        (1 - rho * rho) * std::sqrt((1 + rho * rho / 2) / std::max(n_select - 3, 1.0));
+    if (a.v.spearman > rho + 2 * se) return true;
+    if (a.v.spearman < rho - 2 * se) return false;
+    return a.v.max_decile_error < b.v.max_decile_error - 0.01;
+  };
+  std::optional<Scored> best;
+  for (const bool eq2_base : {true, false}) {
+    Features f = base;
+    f.eq2_base = eq2_base;
+    Scored current = score(f);
+    while (true) {  // forward selection of the optional channels
+      std::optional<Scored> step;
+      for (int extra = 0; extra < 3; ++extra) {
+        Features g = current.features;
+        bool* flag = extra == 0 ? &g.distance : extra == 1 ? &g.saturation : &g.confidence;
+        const bool allowed = extra == 0   ? options.use_distance
+                             : extra == 1 ? options.use_saturation
+                                          : options.use_confidence && has_confidence;
+        if (*flag || !allowed) continue;
+        *flag = true;
+        Scored candidate = score(g);
+        if (better(candidate, current) && (!step || better(candidate, *step))) step = candidate;
+      }
+      if (!step) break;
+      current = *step;
+    }
+    if (!best || better(current, *best)) best = current;
+  }
+  const Features features = best->features;
 
   NoiseModelFit fit;
   fit.frames = static_cast<int>(frames.size());

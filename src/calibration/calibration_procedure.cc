@@ -862,10 +862,12 @@ std::vector<IntegrationSweepPoint> SweepIntegrationTime(Camera& camera,
 void NoiseCalibrationOptions::Validate() const {
   if (frames < 3 || frames > 100000) Bad("noise frames", frames, "must be in [3, 100000]");
   fit.Validate();
+  if (fit_model) model_fit.Validate();
 }
 
 NoiseCalibration CalibrateNoise(Camera& camera, const NoiseCalibrationOptions& options,
-                                const ProgressCallback& progress, DeltaLScaleFit* fit) {
+                                const ProgressCallback& progress, DeltaLScaleFit* fit,
+                                NoiseModelReport* model) {
   options.Validate();
   std::vector<MetricFrame> frames;
   for (int n = 1; n <= options.frames; ++n) {
@@ -888,6 +890,30 @@ NoiseCalibration CalibrateNoise(Camera& camera, const NoiseCalibrationOptions& o
   n.r_squared = std::isfinite(f.r_squared) ? std::clamp(f.r_squared, -1e9, 1.0) : 0.0;
   n.frames = f.frames;
   n.pixels_used = f.pixels_used;
+  NoiseModelReport report;
+  if (!options.fit_model) {
+    report.note = "not fitted (disabled)";
+  } else if (frames.size() < static_cast<std::size_t>(options.model_fit.min_frames)) {
+    report.note = "not fitted: " + std::to_string(frames.size()) + " frames, the model needs " +
+                  std::to_string(options.model_fit.min_frames);
+  } else {
+    try {
+      report.fit = FitNoiseModel(frames, options.model_fit);
+      const NoiseModelFit& m = *report.fit;
+      report.stored = m.fitted.spearman >= m.eq2.spearman;
+      report.note = report.stored ? "stored: it ranks held-out pixels at least as well as eq. 2"
+                                  : "not stored: eq. 2 ranks held-out pixels better";
+      if (report.stored) {
+        n.model = m.model;
+        n.model_spearman = m.fitted.spearman;
+        n.eq2_spearman = m.eq2.spearman;
+        n.model_max_decile_error = m.fitted.max_decile_error;
+      }
+    } catch (const Error& e) {
+      report.note = std::string("not fitted: ") + e.what();
+    }
+  }
+  if (model) *model = report;
   n.Validate();
   Report(progress, "noise", static_cast<int>(frames.size()), options.frames,
          "sigma = " + Num(f.scale) + " x dL of eq. 2 (R^2 " + Num(f.r_squared) + ", " +

@@ -152,6 +152,13 @@ void NoiseCalibration::Validate() const {
     Bad("noise.r_squared = " + Num(r_squared) + " must be finite and <= 1");
   }
   if (frames < 0 || pixels_used < 0) Bad("noise.frames and noise.pixels_used must be >= 0");
+  if (model) model->Validate();
+  for (double v : {model_spearman, eq2_spearman}) {
+    if (!(v >= -1.0 && v <= 1.0)) Bad("noise.model spearman values must be in [-1, 1]");
+  }
+  if (!(model_max_decile_error >= 0.0) || !std::isfinite(model_max_decile_error)) {
+    Bad("noise.model.held_out_max_decile_error must be finite and >= 0");
+  }
 }
 
 void OffsetCalibration::Validate() const {

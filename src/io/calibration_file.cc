@@ -16,6 +16,17 @@
 namespace tofcam {
 namespace {
 
+// The model's numbers in file order (names = the YAML keys).
+std::vector<std::pair<std::string, double>> NoiseModelFields(const NoiseModel& m) {
+  return {{"intercept", m.intercept},
+          {"log_amplitude", m.log_amplitude},
+          {"log_intensity", m.log_intensity},
+          {"log_distance", m.log_distance},
+          {"amplitude_fraction", m.amplitude_fraction},
+          {"amplitude_ref", m.amplitude_ref},
+          {"log_confidence", m.log_confidence}};
+}
+
 constexpr const char* kFormatTag = "tofcam-calibration";
 constexpr int kMaxSide = 16384;
 constexpr long long kMaxPixels = 1LL << 24;
@@ -167,6 +178,17 @@ void SaveCalibration(const std::filesystem::path& path, const OffsetCalibration&
     out << YAML::Key << "r_squared" << YAML::Value << n.r_squared;
     out << YAML::Key << "frames" << YAML::Value << n.frames;
     out << YAML::Key << "pixels_used" << YAML::Value << n.pixels_used;
+    if (n.model) {
+      const NoiseModel& m = *n.model;
+      out << YAML::Key << "model" << YAML::Value << YAML::BeginMap;
+      for (const auto& [key, value] : NoiseModelFields(m)) {
+        out << YAML::Key << key << YAML::Value << value;
+      }
+      out << YAML::Key << "held_out_spearman" << YAML::Value << n.model_spearman;
+      out << YAML::Key << "eq2_held_out_spearman" << YAML::Value << n.eq2_spearman;
+      out << YAML::Key << "held_out_max_decile_error" << YAML::Value << n.model_max_decile_error;
+      out << YAML::EndMap;
+    }
     out << YAML::EndMap;
   }
   if (calibration.controller_setpoint) {
@@ -263,7 +285,7 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
     }
   }
   if (const YAML::Node noise = root["noise"]) {
-    in.CheckKeys(noise, {"delta_l_scale", "r_squared", "frames", "pixels_used"}, "noise");
+    in.CheckKeys(noise, {"delta_l_scale", "r_squared", "frames", "pixels_used", "model"}, "noise");
     NoiseCalibration n;
     const YAML::Node scale = in.Required(noise, "delta_l_scale");
     n.delta_l_scale = in.Double(scale, "noise.delta_l_scale");
@@ -275,6 +297,39 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
         static_cast<int>(in.Integer(in.Required(noise, "frames"), "noise.frames", 0, 1 << 30));
     n.pixels_used = static_cast<int>(
         in.Integer(in.Required(noise, "pixels_used"), "noise.pixels_used", 0, 1 << 30));
+    if (const YAML::Node model = noise["model"]) {
+      NoiseModel m;
+      std::set<std::string> model_keys{"held_out_spearman", "eq2_held_out_spearman",
+                                       "held_out_max_decile_error"};
+      for (const auto& [key, value] : NoiseModelFields(m)) model_keys.insert(key);
+      in.CheckKeys(model, model_keys, "noise.model");
+      m.intercept = in.Double(in.Required(model, "intercept"), "noise.model.intercept");
+      m.log_amplitude = in.Double(in.Required(model, "log_amplitude"), "noise.model.log_amplitude");
+      m.log_intensity = in.Double(in.Required(model, "log_intensity"), "noise.model.log_intensity");
+      m.log_distance = in.Double(in.Required(model, "log_distance"), "noise.model.log_distance");
+      m.amplitude_fraction =
+          in.Double(in.Required(model, "amplitude_fraction"), "noise.model.amplitude_fraction");
+      m.amplitude_ref = in.Double(in.Required(model, "amplitude_ref"), "noise.model.amplitude_ref");
+      m.log_confidence =
+          in.Double(in.Required(model, "log_confidence"), "noise.model.log_confidence");
+      try {
+        m.Validate();
+      } catch (const Error& e) {
+        in.Fail(model, e.what());
+      }
+      n.model = m;
+      n.model_spearman =
+          in.Double(in.Required(model, "held_out_spearman"), "noise.model.held_out_spearman");
+      n.eq2_spearman = in.Double(in.Required(model, "eq2_held_out_spearman"),
+                                 "noise.model.eq2_held_out_spearman");
+      n.model_max_decile_error = in.Double(in.Required(model, "held_out_max_decile_error"),
+                                           "noise.model.held_out_max_decile_error");
+    }
+    try {
+      n.Validate();
+    } catch (const Error& e) {
+      in.Fail(noise, e.what());
+    }
     c.noise = n;
   }
   if (const YAML::Node sp = root["controller_setpoint"]) {

@@ -519,6 +519,13 @@ MeasuredDefaults ApplyMeasuredDefaults(PipelineOptions& options,
     options.accuracy.scale = c->noise->delta_l_scale;
     from.delta_l_scale = "the calibration file's noise calibration (" +
                          std::to_string(c->noise->frames) + " static frames)";
+    if (c->noise->model) {
+      // The fitted model replaces eq. 2; a configuration that sets accuracy.scale keeps eq. 2.
+      options.accuracy.model = c->noise->model;
+      from.delta_l_scale = "the calibration file's fitted noise model (" +
+                           std::to_string(c->noise->frames) + " static frames; eq. 2 scale " +
+                           std::to_string(c->noise->delta_l_scale) + " unused)";
+    }
   } else if (source_delta_l_scale && std::isfinite(*source_delta_l_scale) &&
              *source_delta_l_scale > 0.0 && *source_delta_l_scale <= 1e6) {
     options.accuracy.scale = *source_delta_l_scale;

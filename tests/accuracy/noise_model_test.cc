@@ -133,7 +133,9 @@ TEST(NoiseModel, UsesTheVendorConfidenceAndRanksAtLeastAsWell) {
   EXPECT_LT(fit.model.log_confidence, -0.5);  // more confidence, less noise
   EXPECT_GE(fit.fitted.spearman, fit.vendor.spearman);
   EXPECT_GT(fit.fitted.spearman, fit.eq2.spearman);
-  EXPECT_EQ(fit.features, "ln A, ln r, A/A_ref, ln(1+C)");
+  // σ ∝ A^-1/2 is eq. 2's amplitude-only slope: the selection keeps eq. 2's slopes and adds
+  // the confidence channel (and nothing that does not help on the selection pixels).
+  EXPECT_EQ(fit.features, "eq. 2 slopes, ln(1+C)");
 }
 
 TEST(NoiseModel, DeltaLStageOutputsTheModelsSigma) {

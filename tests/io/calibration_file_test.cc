@@ -56,7 +56,23 @@ OffsetCalibration Sample() {
   c.pixel_flags(2, 4) = PixelFlags(Flag::kInvalid);
   c.distance_correction = DistanceCorrection{0.5, 0.05, {0.01f, -0.0123456789f, 0.0f}};
   c.exposure_offset_m_per_ms = 0.0009765625;
-  c.noise = NoiseCalibration{0.1875, 0.8125, 30, 19000};
+  c.noise = NoiseCalibration();
+  c.noise->delta_l_scale = 0.1875;
+  c.noise->r_squared = 0.8125;
+  c.noise->frames = 30;
+  c.noise->pixels_used = 19000;
+  NoiseModel model;
+  model.intercept = -1.5;
+  model.log_amplitude = -0.8125;
+  model.log_intensity = 0.375;
+  model.log_distance = 0.1234567890123;
+  model.amplitude_fraction = 0.25;
+  model.amplitude_ref = 24381.5;
+  model.log_confidence = -0.0625;
+  c.noise->model = model;
+  c.noise->model_spearman = 0.875;
+  c.noise->eq2_spearman = 0.75;
+  c.noise->model_max_decile_error = 0.125;
   ControllerSetpoint sp;
   sp.target_intensity = 28531.25;
   sp.bias_register = 151;
@@ -96,6 +112,20 @@ void ExpectSame(const OffsetCalibration& a, const OffsetCalibration& b) {
     EXPECT_EQ(a.noise->r_squared, b.noise->r_squared);
     EXPECT_EQ(a.noise->frames, b.noise->frames);
     EXPECT_EQ(a.noise->pixels_used, b.noise->pixels_used);
+    ASSERT_EQ(a.noise->model.has_value(), b.noise->model.has_value());
+    if (a.noise->model) {
+      const NoiseModel &x = *a.noise->model, &y = *b.noise->model;
+      EXPECT_EQ(x.intercept, y.intercept);
+      EXPECT_EQ(x.log_amplitude, y.log_amplitude);
+      EXPECT_EQ(x.log_intensity, y.log_intensity);
+      EXPECT_EQ(x.log_distance, y.log_distance);
+      EXPECT_EQ(x.amplitude_fraction, y.amplitude_fraction);
+      EXPECT_EQ(x.amplitude_ref, y.amplitude_ref);
+      EXPECT_EQ(x.log_confidence, y.log_confidence);
+      EXPECT_EQ(a.noise->model_spearman, b.noise->model_spearman);
+      EXPECT_EQ(a.noise->eq2_spearman, b.noise->eq2_spearman);
+      EXPECT_EQ(a.noise->model_max_decile_error, b.noise->model_max_decile_error);
+    }
   }
   ASSERT_EQ(a.controller_setpoint.has_value(), b.controller_setpoint.has_value());
   if (a.controller_setpoint) {
@@ -202,6 +232,13 @@ TEST(CalibrationFileTest, RejectsEveryMalformedField) {
   ExpectRejected("delta_l_scale: 0.1875", "delta_l_scale: -1", "must be in (0, 1e6]");
   ExpectRejected("  delta_l_scale: 0.1875\n", "", "missing key 'delta_l_scale'");
   ExpectRejected("pixels_used: 19000", "pixels_used: 19000\n  sigma: 1", "unknown key 'sigma'");
+  ExpectRejected("log_amplitude: -0.8125", "log_amplitude: 5000", "within +-1e3");
+  ExpectRejected("log_amplitude: -0.8125", "log_amplitude: .nan", "log_amplitude");
+  ExpectRejected("amplitude_ref: 24381.5", "amplitude_ref: 0", "amplitude_ref");
+  ExpectRejected("    log_confidence: -0.0625\n", "", "missing key 'log_confidence'");
+  ExpectRejected("log_confidence: -0.0625", "log_confidence: -0.0625\n    slope: 1",
+                 "unknown key 'slope'");
+  ExpectRejected("held_out_spearman: 0.875", "held_out_spearman: 2", "spearman");
   ExpectRejected("bias_register: 151", "bias_register: 0", "bias_register = 0 is outside");
   ExpectRejected("target_intensity: 28531.25", "target_intensity: 70000", "(0, 65532]");
   ExpectRejected("gain_register_per_intensity: 0.00390625", "gain_register_per_intensity: 2",

@@ -310,7 +310,11 @@ OffsetCalibration Measured() {
   c.width = 2;
   c.height = 2;
   c.offset_m = Image<float>(2, 2, 0.0f);
-  c.noise = NoiseCalibration{0.25, 0.8, 30, 4};
+  c.noise = NoiseCalibration();
+  c.noise->delta_l_scale = 0.25;
+  c.noise->r_squared = 0.8;
+  c.noise->frames = 30;
+  c.noise->pixels_used = 4;
   ControllerSetpoint p;
   p.target_intensity = 25000.0;
   p.bias_register = 130;

@@ -113,6 +113,11 @@ def test_importers_keep_the_real_cameras_channels(data_dir):
     np.testing.assert_allclose(metric.radial_distance_m[valid], depth_mm[valid] / 1000.0,
                                rtol=0, atol=1e-6)
     assert (frame.source_flags[~valid] & int(tofcam.Flag.INVALID)).all()
+    # The camera's confidence byte (0 = best) is kept, turned so that higher is better, and
+    # travels into the metric frame.
+    np.testing.assert_array_equal(frame.confidence, 255.0 - raw[..., 2])
+    assert frame.info.confidence_source.startswith("ADI")
+    np.testing.assert_array_equal(metric.confidence, frame.confidence)
     cam = tofcam.ImportedCamera(seq)
     assert len(cam) == 1 and cam.grab() is not None and cam.grab() is None
     assert "adi-interleaved" in tofcam.import_formats()

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "tofcam/accuracy/delta_l.h"
+#include "tofcam/accuracy/noise_model.h"
 #include "tofcam/calibration/offset_calibration.h"
 #include "tofcam/control/integration_time_controller.h"
 #include "tofcam/core/camera.h"
@@ -233,17 +234,31 @@ struct NoiseCalibrationOptions {
   /// with the frames it had (at least 3).
   int frames = 30;
   DeltaLFitOptions fit;  ///< Passed to FitDeltaLScale.
+  /// Also fit the noise model (FitNoiseModel) when at least model_fit.min_frames frames came;
+  /// it is stored only when its held-out Spearman ρ is at least eq. 2's.
+  bool fit_model = true;
+  NoiseModelFitOptions model_fit;
 
   void Validate() const;
 };
 
+/// What CalibrateNoise did about the noise model.
+struct NoiseModelReport {
+  std::optional<NoiseModelFit> fit;  ///< The fit with its held-out validation, when it ran.
+  bool stored = false;               ///< The model went into the NoiseCalibration.
+  std::string note;                  ///< Why it was (not) stored or did not run, one line.
+};
+
 /// Grabs static frames at the camera's current integration time and fits the ΔL scale
 /// (FitDeltaLScale). Throws Error(kInvalidArgument) for bad options or too few usable pixels,
-/// Error(kIo) when a source ends before 3 frames. `fit` receives the full fit when not null.
+/// Error(kIo) when a source ends before 3 frames. `fit` receives the full fit when not null;
+/// with options.fit_model, the noise model is fitted too and `model` (when not null) says
+/// what became of it.
 [[nodiscard]] NoiseCalibration CalibrateNoise(Camera& camera,
                                               const NoiseCalibrationOptions& options = {},
                                               const ProgressCallback& progress = {},
-                                              DeltaLScaleFit* fit = nullptr);
+                                              DeltaLScaleFit* fit = nullptr,
+                                              NoiseModelReport* model = nullptr);
 
 /// The noise scale a simulator's ground truth gives for one frame: least squares of the true
 /// per-pixel σ² (GroundTruth::sigma_m) on ΔL² of eq. 2 with scale 1, through the origin, over

@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "tofcam/accuracy/delta_l.h"
 #include "tofcam/control/integration_time_controller.h"
 #include "tofcam/core/frame.h"
 
@@ -84,6 +85,15 @@ struct NoiseCalibration {
   double r_squared = 0.0;      ///< Fit quality (informative), [-1e9, 1].
   int frames = 0;              ///< Static frames the temporal σ came from, >= 0 (informative).
   int pixels_used = 0;         ///< Pixels in the fit, >= 0 (informative).
+  /// The fitted noise model (tofcam/accuracy/noise_model.h) when `tofcam calibrate --noise`
+  /// found one that ranks held-out pixels at least as well as eq. 2; the pipeline's ΔL then
+  /// outputs its σ unless the configuration sets accuracy.scale.
+  std::optional<NoiseModel> model;
+  /// Held-out quality of the stored model and of eq. 2 (informative): Spearman ρ against the
+  /// measured temporal σ, and the model's largest per-decile |predicted / measured - 1|.
+  double model_spearman = 0.0;
+  double eq2_spearman = 0.0;
+  double model_max_decile_error = 0.0;
 
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;

@@ -39,9 +39,9 @@ struct FilterSetOptions {
 };
 
 /// Runs the enabled filters in this order: the per-pixel ones (range, amplitude, saturation,
-/// accuracy, confidence), then flying pixel, jump edge and Weingarten cells. Each neighbourhood filter sees
-/// `frame.flags` plus everything raised before it as "already rejected", so it ignores those
-/// neighbours; the cell filter comes last because it counts the points that survived. Returns
+/// accuracy, confidence), then flying pixel, jump edge and Weingarten cells. Each neighbourhood
+/// filter sees `frame.flags` plus everything raised before it as "already rejected", so it ignores
+/// those neighbours; the cell filter comes last because it counts the points that survived. Returns
 /// the union of the flags raised (not `frame.flags`); merge it with MergeFlags(). Throws like
 /// the individual filters (e.g. kInvalidArgument when the accuracy filter is enabled and
 /// `frame.delta_l_m` is empty, kMismatch when `rays` has another size).
