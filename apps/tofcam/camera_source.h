@@ -20,6 +20,7 @@ struct CameraSourceOptions {
   bool loop = false;       ///< Playback: start again at the end.
   int integration_time_register = 0;  ///< 0 = the source's default.
   std::string camera_model;           ///< Simulator: camera model name or YAML file; "" = SR-2.
+  int ros2_domain = 0;                ///< ROS 2 source: DDS domain unless its spec names one.
 };
 
 using CameraFactory =

@@ -30,6 +30,7 @@
 #include "tofcam/pipeline/pipeline.h"
 #ifdef TOFCAM_WITH_ROS2
 #include "tofcam/ros2/publisher.h"
+#include "tofcam/ros2/ros2_camera.h"
 #endif
 
 namespace tofcam::cli {
@@ -174,7 +175,9 @@ void RunRun(const RunOptions& o) {
     throw Error(ErrorCode::kIo, "cannot write " + csv_path.string() + ": " + std::strerror(errno));
   }
 
-  std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
+  CameraSourceOptions source = o.source;
+  source.ros2_domain = o.ros2_domain;
+  std::unique_ptr<Camera> camera = OpenCamera(o.camera, source);
   LoadPipelineCalibration(options, camera->Info());
   // Camera-specific values the configuration left at their defaults come from measurements of
   // this camera (docs/pipeline.md): the calibration file, else what the source knows.
@@ -239,7 +242,7 @@ void RunRun(const RunOptions& o) {
       throw Error(ErrorCode::kNotFound,
                   "--ros2-wait-subscribers " + std::to_string(o.ros2_wait_subscribers) + ": only " +
                       std::to_string(ros2->MatchedSubscribers()) + " subscriber(s) of " +
-                      ros2::DdsTopicName(o.ros2_namespace, "points") + " in DDS domain " +
+                      ros2::DdsTopicName(o.ros2_namespace, "*") + " in DDS domain " +
                       std::to_string(o.ros2_domain) + " after " + std::to_string(o.ros2_wait_s) +
                       " s");
     }
@@ -363,6 +366,16 @@ void RunRun(const RunOptions& o) {
   json["interrupted"] = g_interrupted.load();
   json["end_of_stream"] = end_of_stream;
 #ifdef TOFCAM_WITH_ROS2
+  if (const auto* ros2_camera = dynamic_cast<const ros2::Ros2Camera*>(camera.get())) {
+    // Malformed or unpaired samples the ROS 2 source skipped (never processed).
+    json["source_skipped_samples"] = ros2_camera->skipped();
+    if (ros2_camera->skipped() > 0) {
+      json["source_last_skip"] = ros2_camera->last_skip();
+      std::fprintf(stderr, "run: warning: the ROS 2 source skipped %llu sample(s); last: %s\n",
+                   static_cast<unsigned long long>(ros2_camera->skipped()),
+                   ros2_camera->last_skip().c_str());
+    }
+  }
   if (ros2) {
     ros2->Flush(2.0);
     // Time spent converting and handing each frame to DDS (false colour included), ms.
@@ -419,7 +432,8 @@ void SetupRunCommand(CLI::App& app) {
                 "intensity, false_color, camera_info, diagnostics; docs/ros2.md)");
   sub->add_option("--ros2-namespace", o->ros2_namespace, "ROS namespace of the topics")
       ->capture_default_str();
-  sub->add_option("--ros2-domain", o->ros2_domain, "DDS domain (ROS_DOMAIN_ID), 0..232")
+  sub->add_option("--ros2-domain", o->ros2_domain,
+                  "DDS domain (ROS_DOMAIN_ID), 0..232, of --ros2 and of a ros2: camera")
       ->capture_default_str();
   sub->add_option("--ros2-frame-id", o->ros2_frame_id,
                   "header.frame_id: the camera's optical frame (REP 103)")
@@ -428,8 +442,8 @@ void SetupRunCommand(CLI::App& app) {
       "--ros2-reliable", o->ros2_reliable,
       "Reliable QoS, keep last 10 (default: best effort, keep last 5, as sensor drivers)");
   sub->add_option("--ros2-wait-subscribers", o->ros2_wait_subscribers,
-                  "Before the first frame, wait until this many subscribers of <namespace>/points "
-                  "matched (error after --ros2-wait-s); 0 = do not wait")
+                  "Before the first frame, wait until this many subscribers matched one of the "
+                  "topics (error after --ros2-wait-s); 0 = do not wait")
       ->capture_default_str();
   sub->add_option("--ros2-wait-s", o->ros2_wait_s, "Timeout of --ros2-wait-subscribers, s")
       ->capture_default_str();

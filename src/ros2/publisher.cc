@@ -1,5 +1,6 @@
 #include "tofcam/ros2/publisher.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -196,9 +197,14 @@ void Ros2Publisher::Publish(const PipelineResult& result, const Image<Rgb8>& fal
 }
 
 int Ros2Publisher::MatchedSubscribers() const {
-  dds_publication_matched_status_t st{};
-  Check(dds_get_publication_matched_status(impl_->writers[kPoints], &st), "ros2 matched status");
-  return static_cast<int>(st.current_count);
+  int most = 0;
+  for (dds_entity_t w : impl_->writers) {
+    if (w == 0) continue;
+    dds_publication_matched_status_t st{};
+    Check(dds_get_publication_matched_status(w, &st), "ros2 matched status");
+    most = std::max(most, static_cast<int>(st.current_count));
+  }
+  return most;
 }
 
 bool Ros2Publisher::WaitForSubscribers(int count, double timeout_s) {

@@ -201,7 +201,7 @@ TEST(Ros2Publisher, NoSubscriberIsAClearTimeoutNotAHang) {
   const std::string log = ReadText(dir / "run.log");
   EXPECT_NE(status, 0) << log;
   EXPECT_NE(status, -1) << "killed: it hung";
-  EXPECT_NE(log.find("subscriber(s) of rt/t15/nobody/points"), std::string::npos) << log;
+  EXPECT_NE(log.find("subscriber(s) of rt/t15/nobody/*"), std::string::npos) << log;
   fs::remove_all(dir);
 }
 

@@ -75,10 +75,10 @@ class Ros2Publisher {
   void Publish(const PipelineResult& result, const Image<Rgb8>& false_color,
                const Ros2ControllerState& controller);
 
-  /// Readers matched on the points topic.
+  /// Readers matched on the topic with the most of them.
   [[nodiscard]] int MatchedSubscribers() const;
-  /// Waits until at least `count` readers match the points topic or `timeout_s` passes; returns
-  /// whether they did.
+  /// Waits until at least `count` readers match one of the topics (MatchedSubscribers) or
+  /// `timeout_s` passes; returns whether they did.
   bool WaitForSubscribers(int count, double timeout_s);
   /// Reliable writers: waits up to `timeout_s` until matched readers acknowledged every sample
   /// (call before exiting). Best effort: returns at once.

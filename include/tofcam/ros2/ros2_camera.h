@@ -31,6 +31,15 @@ struct Ros2CameraOptions {
   void Validate() const;
 };
 
+/// Options from the CLI spec `<namespace>[?key=value&...]` (the part after `ros2:`; see
+/// docs/ros2.md). Keys: driver (tofcam, azure-kinect, ifm3d, royale: that driver's topic names,
+/// depth axis, range and model; applied first), depth, amplitude, intensity, camera_info (topic
+/// names, relative to the namespace unless they start with '/'; intensity=none for none),
+/// depth_axis (z or radial), range_m, model, timeout_s, reliable (0 or 1), history (KEEP_LAST),
+/// domain. `domain_id` is the domain unless the spec has one. Throws Error(kInvalidArgument)
+/// naming the key for an unknown key, driver or a bad value.
+[[nodiscard]] Ros2CameraOptions ParseRos2CameraSpec(const std::string& spec, int domain_id);
+
 /// Resolves a topic against a namespace: "/abs" stays, "rel" becomes <name_space>/rel.
 [[nodiscard]] std::string ResolveTopic(const std::string& name_space, const std::string& topic);
 
