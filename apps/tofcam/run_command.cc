@@ -144,6 +144,41 @@ std::pair<std::optional<double>, std::string> SourceNoiseScale(const Camera& cam
   return {std::nullopt, {}};
 }
 
+#ifdef TOFCAM_WITH_ROS2
+// Remote commands (docs/ros2.md): I_A for the controller; a register for the controller (the
+// fixed one holds it) or, when not controlling, for the camera. Takes effect from the next
+// frame; a refused command is a warning, not the end of the run. Returns the number applied.
+int ApplyRemoteCommands(const ros2::Ros2Commands& commands, bool controlling,
+                        PipelineResult& result, Pipeline& pipeline, Camera& camera) {
+  int applied = 0;
+  if (commands.target_intensity) {
+    try {
+      if (!controlling) throw Error(ErrorCode::kUnsupported, "not controlling");
+      pipeline.SetTargetIntensity(*commands.target_intensity, result.next_integration_register);
+      std::fprintf(stderr, "run: remote: I_A %.6g applied\n", *commands.target_intensity);
+      ++applied;
+    } catch (const Error& e) {
+      std::fprintf(stderr, "run: warning: remote I_A %.6g refused: %s\n",
+                   *commands.target_intensity, e.what());
+    }
+  }
+  if (commands.integration_register) {
+    try {
+      int reg = *commands.integration_register;
+      if (controlling) reg = pipeline.SetControllerRegister(reg);
+      camera.SetIntegrationTimeRegister(reg);
+      result.next_integration_register = reg;
+      std::fprintf(stderr, "run: remote: integration register %d applied\n", reg);
+      ++applied;
+    } catch (const Error& e) {
+      std::fprintf(stderr, "run: warning: remote integration register %d refused: %s\n",
+                   *commands.integration_register, e.what());
+    }
+  }
+  return applied;
+}
+#endif
+
 void RunRun(const RunOptions& o) {
   std::set<std::string> given_keys;
   PipelineOptions options = ResolveOptions(o, &given_keys);
@@ -248,6 +283,7 @@ void RunRun(const RunOptions& o) {
     }
   }
   double ros2_publish_s = 0.0;
+  int ros2_commands = 0;
 #else
   if (o.ros2) {
     throw Error(ErrorCode::kUnsupported,
@@ -289,6 +325,8 @@ void RunRun(const RunOptions& o) {
       state.next_integration_register = result.next_integration_register;
       ros2->Publish(result, pipeline.RenderFiltered(result), state);
       ros2_publish_s += std::chrono::duration<double>(Clock::now() - publish_start).count();
+      ros2_commands +=
+          ApplyRemoteCommands(ros2->TakeCommands(), controlling, result, pipeline, *camera);
     }
 #endif
     const FrameStats& s = result.stats;
@@ -380,6 +418,7 @@ void RunRun(const RunOptions& o) {
     ros2->Flush(2.0);
     // Time spent converting and handing each frame to DDS (false colour included), ms.
     json["ros2_published_frames"] = ros2->published_frames();
+    json["ros2_commands_applied"] = ros2_commands;
     json["ros2_publish_ms_per_frame"] =
         Real(summary.frames > 0 ? 1e3 * ros2_publish_s / summary.frames : NAN);
   }

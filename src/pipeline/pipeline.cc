@@ -176,6 +176,29 @@ void Pipeline::ResetController(int reg) {
   if (controller_) controller_->Reset(reg);
 }
 
+void Pipeline::SetTargetIntensity(double target_intensity, int current_register) {
+  if (!controller_) {
+    throw Error(ErrorCode::kUnsupported, "the controller is off: no set point to change");
+  }
+  ControllerOptions c = options_.controller;
+  c.target_intensity = target_intensity;
+  ValidateSection("controller", [&] { c.Validate(); });
+  controller_ = MakeController(c);
+  controller_->Reset(current_register);
+  options_.controller = c;
+}
+
+int Pipeline::SetControllerRegister(int reg) {
+  if (!controller_) {
+    throw Error(ErrorCode::kUnsupported, "the controller is off: no register to set");
+  }
+  ControllerOptions& c = options_.controller;
+  c.bias_register = std::clamp(reg, c.min_register, c.max_register);
+  controller_ = MakeController(c);
+  controller_->Reset(c.bias_register);
+  return c.bias_register;
+}
+
 std::string_view Pipeline::ControllerName() const {
   return controller_ ? controller_->Name() : std::string_view();
 }

@@ -69,6 +69,39 @@ TEST(PipelineTest, SourceWithoutIntegrationRegisterRunsOpenLoop) {
   EXPECT_THROW(Pipeline(PipelineOptions{}, info), Error);
 }
 
+TEST(PipelineTest, SetPointAndRegisterChangeWhileRunning) {
+  // The paper's law with a fixed gain: c_{t+1} = -V_p (I - I_A) + c_0, I = 30000 everywhere.
+  PipelineOptions options;
+  options.controller.kind = ControllerKind::kMayProportional;
+  options.controller.gain_register_per_intensity = 0.001;
+  options.controller.target_intensity = 16000;
+  options.controller.bias_register = 40;
+  Pipeline pipeline(options, TinyCamera());
+  EXPECT_EQ(pipeline.Process(TinyFrame(1000, 2000)).next_integration_register,
+            40 - 14);  // -0.001 (30000 - 16000) + 40
+  pipeline.SetTargetIntensity(25000, 26);
+  EXPECT_EQ(pipeline.options().controller.target_intensity, 25000);
+  EXPECT_EQ(pipeline.Process(TinyFrame(1000, 2000)).next_integration_register, 40 - 5);
+  EXPECT_EQ(pipeline.SetControllerRegister(100), 100);  // the bias c_0
+  EXPECT_EQ(pipeline.Process(TinyFrame(1000, 2000)).next_integration_register, 100 - 5);
+  // Out of range: a named error, the controller unchanged.
+  EXPECT_THROW(pipeline.SetTargetIntensity(70000, 95), Error);
+  EXPECT_THROW(pipeline.SetTargetIntensity(std::nan(""), 95), Error);
+  EXPECT_EQ(pipeline.Process(TinyFrame(1000, 2000)).next_integration_register, 95);
+
+  // The fixed controller holds the register it is given, clamped to the bounds.
+  options.controller.kind = ControllerKind::kFixed;
+  Pipeline fixed(options, TinyCamera());
+  EXPECT_EQ(fixed.Process(TinyFrame(1000, 2000)).next_integration_register, 40);
+  EXPECT_EQ(fixed.SetControllerRegister(300), fixed.options().controller.max_register);
+  EXPECT_EQ(fixed.Process(TinyFrame(1000, 2000)).next_integration_register,
+            fixed.options().controller.max_register);
+
+  options.controller_enabled = false;
+  Pipeline off(options, TinyCamera());
+  EXPECT_THROW(off.SetControllerRegister(10), Error);
+}
+
 OffsetCalibration TinyCalibration(float o0, float o1) {
   OffsetCalibration c;
   c.camera_model = "SR-2";

@@ -187,6 +187,62 @@ TEST(Ros2Publisher, IndependentSubscriberReceivesThePipelinesClouds) {
   fs::remove_all(dir);
 }
 
+TEST(Ros2Publisher, RemoteCommandsSetTheRegisterAndTheSetPoint) {
+  const int domain = ClaimDomain();
+  ASSERT_GE(domain, 0);
+  UseLoopbackOnly();
+  const fs::path dir = ScratchDir("commands");
+  fs::create_directories(dir / "probe");
+  // The probe sends register 77 and I_A 9000 after its first cloud; the fixed controller starts
+  // at c_0 = 40 and must hold 77 from some frame on.
+  Child probe =
+      Spawn({TOFCAM_ROS2_PROBE, "--domain", std::to_string(domain), "--namespace", "/t15/cmd",
+             "--count", "3", "--timeout-s", "60", "--reliable", "1", "--send-register", "77",
+             "--send-target", "9000", "--out", (dir / "probe").string()},
+            (dir / "probe.log").string());
+  Child run = Spawn({TOFCAM_CLI,
+                     "run",
+                     "--camera",
+                     "sim:wall",
+                     "--controller",
+                     "fixed",
+                     "--real-time",
+                     "--frames",
+                     "60",
+                     "--out",
+                     (dir / "run").string(),
+                     "--ros2",
+                     "--ros2-domain",
+                     std::to_string(domain),
+                     "--ros2-namespace",
+                     "/t15/cmd",
+                     "--ros2-reliable",
+                     "--ros2-wait-subscribers",
+                     "1",
+                     "--ros2-wait-s",
+                     "30"},
+                    (dir / "run.log").string());
+  ASSERT_EQ(Wait(run), 0) << ReadText(dir / "run.log");
+  ASSERT_EQ(Wait(probe), 0) << ReadText(dir / "probe.log");
+  const std::string log = ReadText(dir / "run.log");
+  EXPECT_NE(log.find("run: remote: integration register 77 applied"), std::string::npos) << log;
+  EXPECT_NE(log.find("run: remote: I_A 9000 applied"), std::string::npos) << log;
+  const std::vector<double> registers =
+      CsvColumn(dir / "run" / "frames.csv", "integration_register");
+  ASSERT_EQ(registers.size(), 60u);
+  EXPECT_EQ(registers.front(), 40);
+  EXPECT_EQ(registers.back(), 77);
+  int switches = 0;
+  for (std::size_t i = 1; i < registers.size(); ++i) {
+    EXPECT_TRUE(registers[i] == 40 || registers[i] == 77) << registers[i];
+    switches += registers[i] != registers[i - 1];
+  }
+  EXPECT_EQ(switches, 1);
+  EXPECT_NE(ReadText(dir / "run" / "summary.json").find("\"ros2_commands_applied\": 2"),
+            std::string::npos);
+  fs::remove_all(dir);
+}
+
 TEST(Ros2Publisher, NoSubscriberIsAClearTimeoutNotAHang) {
   const int domain = ClaimDomain();
   ASSERT_GE(domain, 0);

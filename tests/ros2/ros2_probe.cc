@@ -6,6 +6,9 @@
 //                    is_bigendian fields (name:offset:datatype:count,...) data_bytes
 //   cloud_<k>.bin    the cloud's data bytes
 //   camera_info.txt  width height distortion_model, then k (9 numbers), then d
+// --send-register R / --send-target T: after the first cloud, publish R on
+// <ns>/controller/integration_register (std_msgs/Int32) / T on <ns>/controller/target_intensity
+// (std_msgs/Float64), reliable, as `ros2 topic pub` does.
 // Exit status 0 when everything arrived, 3 on a timeout (message on stderr), 2 on bad usage.
 #include <dds/dds.h>
 
@@ -17,6 +20,8 @@
 
 #include "sensor_msgs/msg/CameraInfo.h"
 #include "sensor_msgs/msg/PointCloud2.h"
+#include "std_msgs/msg/Float64.h"
+#include "std_msgs/msg/Int32.h"
 
 namespace {
 
@@ -27,6 +32,8 @@ struct Args {
   double timeout_s = 20.0;
   bool reliable = false;
   std::string out;
+  int send_register = -1;
+  double send_target = -1.0;
 };
 
 bool Parse(int argc, char** argv, Args& a) {
@@ -45,6 +52,10 @@ bool Parse(int argc, char** argv, Args& a) {
       a.reliable = std::string(v) == "1";
     } else if (k == "--out") {
       a.out = v;
+    } else if (k == "--send-register") {
+      a.send_register = std::atoi(v);
+    } else if (k == "--send-target") {
+      a.send_target = std::atof(v);
     } else {
       return false;
     }
@@ -97,6 +108,25 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "ros2_probe: cannot write %s\n", a.out.c_str());
     return 2;
   }
+  // Command writers (created up front so discovery happens while the clouds flow).
+  dds_qos_t* command_qos = dds_create_qos();
+  dds_qset_reliability(command_qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  dds_qset_history(command_qos, DDS_HISTORY_KEEP_LAST, 7);
+  dds_entity_t register_writer = 0, target_writer = 0;
+  if (a.send_register >= 0) {
+    const dds_entity_t t = dds_create_topic(
+        participant, &std_msgs_msg_dds__Int32__desc,
+        Topic(a.name_space, "controller/integration_register").c_str(), nullptr, nullptr);
+    register_writer = dds_create_writer(participant, t, command_qos, nullptr);
+  }
+  if (a.send_target >= 0) {
+    const dds_entity_t t = dds_create_topic(
+        participant, &std_msgs_msg_dds__Float64__desc,
+        Topic(a.name_space, "controller/target_intensity").c_str(), nullptr, nullptr);
+    target_writer = dds_create_writer(participant, t, command_qos, nullptr);
+  }
+  dds_delete_qos(command_qos);
+  bool sent = false;
   int received = 0;
   bool have_info = false;
   const auto deadline =
@@ -135,6 +165,26 @@ int main(int argc, char** argv) {
       dds_return_loan(clouds, samples, 1);
       samples[0] = nullptr;
     }
+    if (received > 0 && !sent) {
+      sent = true;
+      for (dds_entity_t w : {register_writer, target_writer}) {
+        if (w <= 0) continue;
+        dds_publication_matched_status_t st{};
+        const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+        while (dds_get_publication_matched_status(w, &st) >= 0 && st.current_count < 1 &&
+               std::chrono::steady_clock::now() < until) {
+          dds_sleepfor(DDS_MSECS(5));
+        }
+      }
+      if (register_writer > 0) {
+        const std_msgs_msg_dds__Int32_ m{a.send_register};
+        dds_write(register_writer, &m);
+      }
+      if (target_writer > 0) {
+        const std_msgs_msg_dds__Float64_ m{a.send_target};
+        dds_write(target_writer, &m);
+      }
+    }
     while (dds_take(infos, samples, &info, 1, 1) > 0) {
       const auto* ci = static_cast<const sensor_msgs_msg_dds__CameraInfo_*>(samples[0]);
       if (info.valid_data && !have_info) {
@@ -155,6 +205,9 @@ int main(int argc, char** argv) {
     }
   }
   std::fclose(list);
+  for (dds_entity_t w : {register_writer, target_writer}) {
+    if (w > 0) dds_wait_for_acks(w, DDS_SECS(5));
+  }
   dds_delete(participant);
   if (received < a.count || !have_info) {
     std::fprintf(stderr, "ros2_probe: timeout after %.1f s: %d of %d clouds, camera_info %s\n",

@@ -124,6 +124,17 @@ class Pipeline {
   [[nodiscard]] int InitialIntegrationRegister() const noexcept;
   /// Forgets the controller's history (e.g. after the pan unit moved), continuing at `reg`.
   void ResetController(int reg);
+  /// Changes the controller's set point I_A while running (e.g. a remote command): the
+  /// controller continues from `current_register` (its next output depends on the new I_A from
+  /// the next frame on). `target_intensity` in (0, 65532] register units; the histogram and
+  /// fixed controllers do not use it. Throws Error(kInvalidArgument) out of range and
+  /// Error(kUnsupported) when the controller is off.
+  void SetTargetIntensity(double target_intensity, int current_register);
+  /// Sets the controller's register c_0 while running: the fixed controller holds it, the
+  /// proportional law uses it as its bias, the others continue from it. Clamped to the
+  /// controller's bounds; returns the register set. Throws Error(kUnsupported) when the
+  /// controller is off.
+  int SetControllerRegister(int reg);
   /// Forgets the temporal filter's per-pixel history (e.g. after the pan unit moved).
   void ResetTemporal();
 
