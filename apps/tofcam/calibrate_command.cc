@@ -406,9 +406,10 @@ void SetupCalibrateCommand(CLI::App& app) {
   sub->add_option("--warmup-max-frames", o->warmup_max_frames,
                   "Give up when the drift has not settled after this many frames")
       ->capture_default_str();
-  sub->add_option("--controller", o->controller,
-                  "Exposure controller: vendor-histogram, may-incremental, may-proportional, "
-                  "fixed")
+  sub->add_option(
+         "--controller", o->controller,
+         "Exposure controller: vendor-histogram, may-incremental, may-proportional, model-based, "
+         "fixed")
       ->capture_default_str();
   sub->add_option("--exposure-offset-frames", o->exposure_offset_frames,
                   "Frames per integration time for the exposure offset (0 = do not measure)")

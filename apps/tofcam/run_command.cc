@@ -448,9 +448,10 @@ void SetupRunCommand(CLI::App& app) {
   sub->add_option("--config", o->config, "Pipeline configuration (YAML; see --print-config)");
   sub->add_option("--calibration", o->calibration,
                   "Calibration file (tofcam calibrate); overrides the config's");
-  sub->add_option("--controller", o->controller,
-                  "may-proportional, may-incremental, vendor-histogram, fixed or none; "
-                  "overrides the config's");
+  sub->add_option(
+      "--controller", o->controller,
+      "may-proportional, may-incremental, vendor-histogram, fixed, model-based or none; "
+      "overrides the config's");
   sub->add_option("--out", o->out, "Output directory (frames.csv, summary.json, PNG, PLY)");
   sub->add_option("--png-every", o->png_every,
                   "Write false-colour PNGs (raw and filtered) of every K-th frame; 0 = none")

@@ -213,7 +213,8 @@ void BindFunctions(py::module_& m) {
            }),
            py::arg("kind") = "may-proportional",
            "kind: 'may-proportional' (the paper's printed law), 'may-incremental', "
-           "'vendor-histogram' or 'fixed'; options as the 'controller' configuration section "
+           "'vendor-histogram', 'fixed' or 'model-based'; options as the 'controller' "
+           "configuration section "
            "(target_intensity, gain_register_per_intensity, bias_register, min_register, ...).")
       .def(
           "update", [](PyController& c, const MetricFrame& f) { return c.controller->Update(f); },

@@ -83,18 +83,22 @@ std::string_view ControllerKindName(ControllerKind kind) noexcept {
       return "vendor-histogram";
     case ControllerKind::kFixed:
       return "fixed";
+    case ControllerKind::kModelBased:
+      return "model-based";
   }
   return "unknown";
 }
 
 ControllerKind ParseControllerKind(std::string_view name) {
-  for (ControllerKind k : {ControllerKind::kMayProportional, ControllerKind::kMayIncremental,
-                           ControllerKind::kVendorHistogram, ControllerKind::kFixed}) {
+  for (ControllerKind k :
+       {ControllerKind::kMayProportional, ControllerKind::kMayIncremental,
+        ControllerKind::kVendorHistogram, ControllerKind::kFixed, ControllerKind::kModelBased}) {
     if (ControllerKindName(k) == name) return k;
   }
   throw Error(ErrorCode::kInvalidArgument,
               "unknown controller kind '" + std::string(name) +
-                  "' (known: may-proportional, may-incremental, vendor-histogram, fixed)");
+                  "' (known: may-proportional, may-incremental, vendor-histogram, fixed, "
+                  "model-based)");
 }
 
 void ControllerOptions::Validate() const {
@@ -135,6 +139,18 @@ void ControllerOptions::Validate() const {
   }
   if (!std::isfinite(vendor_gain) || vendor_gain <= 0.0 || vendor_gain > 1.0) {
     Bad("vendor_gain", Num(vendor_gain), "must be in (0, 1]");
+  }
+  auto range = [](double v, double lo, double hi, const char* name, const char* rule) {
+    if (!std::isfinite(v) || v < lo || v > hi) Bad(name, Num(v), rule);
+  };
+  range(max_clipped_fraction, 0.0, 0.5, "max_clipped_fraction", "must be in [0, 0.5]");
+  range(model_max_increase, 1.0, 1000.0, "model_max_increase", "must be in [1, 1000]");
+  range(model_deadband, 0.0, 0.5, "model_deadband", "must be in [0, 0.5]");
+  if (!(model_headroom > 0.0 && model_headroom <= 1.0)) {
+    Bad("model_headroom", Num(model_headroom), "must be in (0, 1]");
+  }
+  if (!(model_backoff > 1.0 && model_backoff <= 1000.0)) {
+    Bad("model_backoff", Num(model_backoff), "must be in (1, 1000]");
   }
   if (vendor_max_step_register < 1) {
     Bad("vendor_max_step_register", std::to_string(vendor_max_step_register), "must be >= 1");
@@ -322,6 +338,84 @@ std::string_view MayIncremental::Name() const {
 
 void MayIncremental::Reset(int current_register) {
   state_ = std::clamp(current_register, options_.min_register, options_.max_register);
+}
+
+// --- ModelBased ------------------------------------------------------------------------------
+
+ModelBased::ModelBased(const ControllerOptions& options)
+    : options_(options), state_(options.bias_register) {
+  options_.Validate();
+}
+
+int ModelBased::Update(const MetricFrame& frame) {
+  const int w = frame.width(), h = frame.height();
+  const Rect r = Clip(options_.roi, w, h);
+  const bool intensity = frame.has_intensity();
+  const double clip =
+      options_.clipped_intensity > 0.0 ? options_.clipped_intensity : kDefaultClippedIntensity;
+  constexpr std::uint16_t kSaturatedBit = static_cast<std::uint16_t>(Flag::kSaturated);
+  peaks_.clear();
+  std::size_t clipped = 0;
+  for (int row = r.row0; row < r.row1; ++row) {
+    for (int col = r.col0; col < r.col1; ++col) {
+      const std::size_t i = static_cast<std::size_t>(row) * static_cast<std::size_t>(w) +
+                            static_cast<std::size_t>(col);
+      if (!CountsForExposure(frame, i, options_.exclude_flags, options_.clipped_intensity)) {
+        continue;
+      }
+      const float a = frame.amplitude[i];
+      const float peak = intensity ? frame.intensity[i] + a : a;
+      // A pixel at full scale now has no measured brightness, only a lower bound.
+      const bool at_scale = peak >= clip || (intensity && frame.intensity[i] >= clip) ||
+                            (!frame.flags.empty() && frame.flags[i].Any(kSaturatedBit));
+      if (at_scale) {
+        ++clipped;
+      } else if (std::isfinite(peak)) {
+        peaks_.push_back(std::max(peak, 0.0f));
+      }
+    }
+  }
+  const std::size_t n = peaks_.size() + clipped;
+  if (n == 0) return RoundClamp(state_, options_.min_register, options_.max_register);
+  const double c = FrameRegister(frame, state_);
+  last_clipped_fraction_ = static_cast<double>(clipped) / static_cast<double>(n);
+  double next = c;
+  if (last_clipped_fraction_ > options_.max_clipped_fraction) {
+    // Few clipped pixels (at most 5x the allowed fraction) are mostly a scene that brightened a
+    // little since the frame the register was chosen on: halve. Many: back off hard.
+    const bool few = last_clipped_fraction_ <= 5.0 * options_.max_clipped_fraction;
+    next = c / (few ? std::min(2.0, options_.model_backoff) : options_.model_backoff);
+  } else {
+    // The q-quantile over all n pixels, the clipped ones counting as the brightest: the pixel of
+    // rank ceil(q n) among the unclipped ones, which all lie below the clipped.
+    const double q = 1.0 - options_.max_clipped_fraction;
+    std::size_t k = static_cast<std::size_t>(std::ceil(q * static_cast<double>(n)));
+    k = std::clamp<std::size_t>(k, 1, n) - 1;
+    double peak_q;
+    if (k >= peaks_.size()) {
+      peak_q = clip;  // the quantile is a clipped pixel: hold
+    } else {
+      std::nth_element(peaks_.begin(), peaks_.begin() + static_cast<std::ptrdiff_t>(k),
+                       peaks_.end());
+      peak_q = peaks_[k];
+    }
+    const double wanted = peak_q > 0.0 ? c * options_.model_headroom * clip / peak_q
+                                       : c * options_.model_max_increase;
+    next = std::min(wanted, c * options_.model_max_increase);
+    if (std::abs(next - c) <= options_.model_deadband * c) next = c;
+  }
+  state_ = std::clamp(next, static_cast<double>(options_.min_register),
+                      static_cast<double>(options_.max_register));
+  return RoundClamp(state_, options_.min_register, options_.max_register);
+}
+
+std::string_view ModelBased::Name() const {
+  return ControllerKindName(ControllerKind::kModelBased);
+}
+
+void ModelBased::Reset(int current_register) {
+  state_ = std::clamp(current_register, options_.min_register, options_.max_register);
+  last_clipped_fraction_ = 0.0;
 }
 
 // --- VendorHistogram -------------------------------------------------------------------------
@@ -535,6 +629,8 @@ std::unique_ptr<IntegrationTimeController> MakeController(const ControllerOption
       return std::make_unique<VendorHistogram>(options);
     case ControllerKind::kFixed:
       return std::make_unique<Fixed>(options);
+    case ControllerKind::kModelBased:
+      return std::make_unique<ModelBased>(options);
   }
   throw Error(ErrorCode::kInvalidArgument, "controller option kind is not a known kind");
 }

@@ -74,6 +74,7 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
   add("may-incremental (scheduled V_p, the default)", ControllerKind::kMayIncremental,
       defaults.bias_register);
   add("vendor-histogram", ControllerKind::kVendorHistogram, defaults.bias_register);
+  add("model-based (not in the paper)", ControllerKind::kModelBased, defaults.bias_register);
   add("fixed-20", ControllerKind::kFixed, 20);
   add("fixed-80", ControllerKind::kFixed, 80);
   Table per_frame{"controllers_frames",
@@ -85,14 +86,14 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
                 {"controller", "I_A / c_0 / V_p", "registers used (min-max)",
                  "settle frames after steps (3.0/4.5/5.0/7.0/8.0 s)", "steady-state |Ī-I_A|/I_A",
                  "same, where I_A is in reach", "register reversals > 2", "frames with saturation",
-                 "mean valid %", "mean RMSE"},
+                 "frames > 1 % saturated", "longest run > 1 %", "mean valid %", "mean RMSE"},
                 {},
                 true};
   struct Outcome {
     std::string label;
     double steady = 0, steady_reachable = 0, valid = 0, rmse = 0;
     int reversals = 0;
-    long long saturated_frames = 0, frames = 0;
+    long long saturated_frames = 0, frames = 0, clipped_frames = 0;
     int reg_min = 0, reg_max = 0;
   };
   std::vector<Outcome> outcomes;
@@ -107,7 +108,7 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     camera.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
     PipelineResult res;
     std::vector<double> times, regs, intensities;
-    long long saturated_frames = 0;
+    long long saturated_frames = 0, clipped_frames = 0, clipped_run = 0, longest_run = 0;
     double valid_sum = 0, rmse_sq = 0;
     long long rmse_n = 0;
     while (camera.NextExposureStartS() < duration_s) {
@@ -120,6 +121,9 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
       }
       const double sat_fraction = static_cast<double>(saturated) / f.flags.size();
       if (saturated > 0) ++saturated_frames;
+      if (sat_fraction > 0.01) ++clipped_frames;
+      clipped_run = sat_fraction > 0.01 ? clipped_run + 1 : 0;
+      longest_run = std::max(longest_run, clipped_run);
       valid_sum += res.stats.valid_fraction;
       rmse_sq += res.stats.sum_squared_error_m2;
       rmse_n += res.stats.truth_error_pixels;
@@ -134,6 +138,7 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     // Settling after each step: frames until the register stays within max(2, 5 %) of the
     // median of the segment's last 10 frames for the rest of the segment.
     std::string settle_text;
+    std::size_t max_settle = 0;
     double steady_sum = 0, reachable_sum = 0;
     int steady_n = 0, reachable_n = 0;
     const double target = popts.controller.target_intensity;
@@ -172,6 +177,7 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
         settled = j;
       }
       settle_text += (settle_text.empty() ? "" : "/") + std::to_string(settled);
+      max_settle = std::max(max_settle, settled);
     }
     Outcome out;
     out.label = setting.label;
@@ -190,6 +196,7 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
       direction = now;
     }
     out.saturated_frames = saturated_frames;
+    out.clipped_frames = clipped_frames;
     out.reg_min = static_cast<int>(*std::min_element(regs.begin(), regs.end()));
     out.reg_max = static_cast<int>(*std::max_element(regs.begin(), regs.end()));
     const ControllerOptions& c = popts.controller;
@@ -199,14 +206,20 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
         {setting.label,
          law ? F(c.target_intensity, 5) + " / " + I(c.bias_register) + " / " +
                    F(c.gain_register_per_intensity, 3)
-             : (c.kind == ControllerKind::kFixed ? "- / " + I(c.bias_register) + " / -"
-                                                 : "SR-3000 histogram"),
+             : (c.kind == ControllerKind::kFixed        ? "- / " + I(c.bias_register) + " / -"
+                : c.kind == ControllerKind::kModelBased ? "<= 1 % clipped"
+                                                        : "SR-3000 histogram"),
          I(out.reg_min) + "-" + I(out.reg_max), settle_text, F(out.steady, 3),
          F(out.steady_reachable, 3), I(out.reversals), I(saturated_frames) + " of " + I(out.frames),
-         Pct(out.valid), Mm(out.rmse)});
+         I(clipped_frames) + " of " + I(out.frames), I(longest_run), Pct(out.valid), Mm(out.rmse)});
     r.metrics[setting.label + ".mean_valid"] = out.valid;
     r.metrics[setting.label + ".mean_rmse"] = out.rmse;
     r.metrics[setting.label + ".saturated_frames"] = static_cast<double>(saturated_frames);
+    r.metrics[setting.label + ".frames_over_1pct_saturated"] = static_cast<double>(clipped_frames);
+    r.metrics[setting.label + ".frames"] = static_cast<double>(out.frames);
+    r.metrics[setting.label + ".max_settle_frames"] = static_cast<double>(max_settle);
+    r.metrics[setting.label + ".longest_run_over_1pct_saturated"] =
+        static_cast<double>(longest_run);
     r.metrics[setting.label + ".steady_state_error"] = out.steady;
     r.metrics[setting.label + ".steady_state_error_in_reach"] = out.steady_reachable;
     r.metrics[setting.label + ".reversals"] = out.reversals;

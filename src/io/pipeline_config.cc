@@ -124,7 +124,7 @@ void VisitOptions(V& v, PipelineOptions& o) {
   v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");
     v.Field("kind", o.controller.kind,
-            "may-proportional, may-incremental, vendor-histogram or fixed");
+            "may-proportional, may-incremental, vendor-histogram, fixed or model-based");
     v.Field("target_intensity",
             Measured<double>{o.controller.target_intensity, defaults.controller.target_intensity},
             "I_A, register units, (0, 65532]; left out: the calibration's set point");
@@ -160,6 +160,16 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("vendor_max_step_register", o.controller.vendor_max_step_register,
             "vendor-histogram: largest step, >= 1");
     v.Field("vendor_deadband", o.controller.vendor_deadband, "vendor-histogram: [0, 254]");
+    v.Field("max_clipped_fraction", o.controller.max_clipped_fraction,
+            "model-based: fraction of ROI pixels allowed to clip, [0, 0.5]");
+    v.Field("model_headroom", o.controller.model_headroom,
+            "model-based: bright quantile at this fraction of full scale, (0, 1]");
+    v.Field("model_max_increase", o.controller.model_max_increase,
+            "model-based: largest factor up per frame, [1, 1000]");
+    v.Field("model_backoff", o.controller.model_backoff,
+            "model-based: factor down when too many pixels clip, (1, 1000]");
+    v.Field("model_deadband", o.controller.model_deadband,
+            "model-based: smallest relative change made, [0, 0.5]");
   });
   v.Section("point_cloud", "Stage 6: organised cloud in the camera frame", [&] {
     v.Field("enabled", o.cloud_enabled, "");

@@ -33,8 +33,9 @@ ControllerOptions Opts(ControllerKind kind, double vp, int c0) {
 }
 
 TEST(ControllerKindTest, NamesRoundTrip) {
-  for (ControllerKind k : {ControllerKind::kMayProportional, ControllerKind::kMayIncremental,
-                           ControllerKind::kVendorHistogram, ControllerKind::kFixed}) {
+  for (ControllerKind k :
+       {ControllerKind::kMayProportional, ControllerKind::kMayIncremental,
+        ControllerKind::kVendorHistogram, ControllerKind::kFixed, ControllerKind::kModelBased}) {
     EXPECT_EQ(ParseControllerKind(ControllerKindName(k)), k);
     EXPECT_EQ(MakeController(Opts(k, 0.01, 50))->Name(), ControllerKindName(k));
   }
@@ -562,6 +563,119 @@ TEST(ControllerTest, MeanOfArbitraryValuesWithinTheReassociationBound) {
   const double bound = 2.0 * n * std::ldexp(1.0, -53) * magnitude / static_cast<double>(count);
   EXPECT_NEAR(MeanControlIntensity(m, {}, exclude, 0.0), expected, bound);
   EXPECT_GT(expected, 0.0);
+}
+
+// A scene of 100 pixels whose brightest tap (I + A) per register is `per_register[i]`: taken at
+// register `reg`, intensity = 0.8 x peak and amplitude = 0.2 x peak, clipped at full scale the
+// way a SwissRanger reports it (amplitude 0, intensity at full scale, kInvalid | kSaturated).
+MetricFrame PeakFrame(const std::vector<double>& per_register, int reg) {
+  const int w = 10, h = static_cast<int>(per_register.size()) / 10;
+  MetricFrame m = Uniform(0.0f, w, h);
+  m.info.integration_time_register = reg;
+  for (std::size_t i = 0; i < per_register.size(); ++i) {
+    const double peak = per_register[i] * reg;
+    if (peak >= 65532.0) {
+      m.intensity[i] = 65532.0f;
+      m.amplitude[i] = 0.0f;
+      m.flags[i] = PixelFlags(Flag::kInvalid) | Flag::kSaturated;
+    } else {
+      m.intensity[i] = static_cast<float>(0.8 * peak);
+      m.amplitude[i] = static_cast<float>(0.2 * peak);
+    }
+  }
+  return m;
+}
+
+TEST(ModelBasedTest, HandComputedStepsFromOneFrame) {
+  // 100 pixels, peak per register 100..199 (pixel i: 100 + i). At register 50 nothing clips
+  // (largest peak 9950). Allowed clipped fraction 1 %: the 99 % quantile is the pixel of rank
+  // ceil(0.99 x 100) = 99, i.e. the 99th smallest: 100 + 98 = 198 per register -> 9900 at 50.
+  // Next register = 50 x 0.85 x 64221 / 9900 = 275.7, limited to 2 x 50 = 100 per step
+  // (model_max_increase 2 here).
+  std::vector<double> scene(100);
+  for (int i = 0; i < 100; ++i) scene[i] = 100.0 + i;
+  ControllerOptions o = Opts(ControllerKind::kModelBased, 0.0, 50);
+  o.max_register = 1000;
+  o.model_max_increase = 2.0;
+  ModelBased c(o);
+  EXPECT_EQ(c.Update(PeakFrame(scene, 50)), 100);
+  EXPECT_EQ(c.Update(PeakFrame(scene, 100)), 200);
+  // At 200 the quantile peak is 39600: 200 x 0.85 x 64221 / 39600 = 275.70 -> 276.
+  EXPECT_EQ(c.Update(PeakFrame(scene, 200)), 276);
+  // At 276 the brightest pixel (199 x 276 = 54924) is still below full scale: the law holds
+  // (it predicted exactly this frame; the change asked for is 0).
+  EXPECT_EQ(c.Update(PeakFrame(scene, 276)), 276);
+  EXPECT_EQ(c.last_clipped_fraction(), 0.0);
+  // At 400, pixels whose peak reaches the clipped level 64221 (98 % of full scale; 160.6 per
+  // register -> pixels 61..99, 39 of them) count as clipped: more than 1 %, so the register is
+  // divided by model_backoff = 8 -> 50.
+  EXPECT_EQ(c.Update(PeakFrame(scene, 400)), 50);
+  EXPECT_NEAR(c.last_clipped_fraction(), 0.39, 1e-12);
+}
+
+TEST(ModelBasedTest, AllowsTheConfiguredFractionToClip) {
+  // One pixel of 100 is a lamp (peak 10^4 per register, clips at any register >= 7); the rest
+  // have 100 per register. With 1 % allowed the lamp may clip and the law exposes the rest:
+  // its 99 % quantile is a 100-per-register pixel -> register 0.85 x 64221 / 100 = 545.9.
+  std::vector<double> scene(100, 100.0);
+  scene[37] = 1e4;
+  ControllerOptions o = Opts(ControllerKind::kModelBased, 0.0, 400);
+  o.max_register = 1000;
+  o.model_max_increase = 10.0;
+  ModelBased c(o);
+  EXPECT_EQ(c.Update(PeakFrame(scene, 400)), 546);
+  EXPECT_NEAR(c.last_clipped_fraction(), 0.01, 1e-12);
+  // With none allowed the lamp rules: clipped now (1 % > 0 %) -> back off by 8.
+  o.max_clipped_fraction = 0.0;
+  ModelBased strict(o);
+  EXPECT_EQ(strict.Update(PeakFrame(scene, 400)), 50);
+}
+
+TEST(ModelBasedTest, SettlesWithinThreeFramesAfterEveryStepOfAScene) {
+  // Closed loop on a proportional plant whose brightness jumps: a dim hall, a hand 40x brighter
+  // in a third of the image, back to the hall. After each step the clipped fraction must fall
+  // to <= 1 % within 3 frames, and the register must then hold (no hunting).
+  std::vector<double> hall(200), hand(200);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.5, 1.5);
+  for (int i = 0; i < 200; ++i) {
+    hall[i] = 40.0 * u(rng);
+    hand[i] = i < 70 ? 1600.0 * u(rng) : hall[i];
+  }
+  ControllerOptions o = Opts(ControllerKind::kModelBased, 0.0, 40);
+  ModelBased c(o);
+  int reg = 40;
+  for (const auto* scene : {&hall, &hand, &hall, &hand}) {
+    int settled_at = -1;
+    for (int frame = 0; frame < 12; ++frame) {
+      const MetricFrame m = PeakFrame(*scene, reg);
+      const int next = c.Update(m);
+      if (settled_at < 0 && c.last_clipped_fraction() <= 0.01 && next == reg) settled_at = frame;
+      if (settled_at >= 0) {
+        EXPECT_EQ(next, reg) << "hunting at frame " << frame;
+      }
+      reg = next;
+    }
+    EXPECT_GE(settled_at, 0);
+    EXPECT_LE(settled_at, 3);
+  }
+}
+
+TEST(ModelBasedTest, RejectsBadOptionsAndEmptyFrames) {
+  ControllerOptions o = Opts(ControllerKind::kModelBased, 0.0, 40);
+  for (auto bad : {+[](ControllerOptions& x) { x.max_clipped_fraction = 0.6; },
+                   +[](ControllerOptions& x) { x.model_headroom = 0.0; },
+                   +[](ControllerOptions& x) { x.model_backoff = 1.0; },
+                   +[](ControllerOptions& x) { x.model_max_increase = 0.5; },
+                   +[](ControllerOptions& x) { x.model_deadband = std::nan(""); }}) {
+    ControllerOptions b = o;
+    bad(b);
+    EXPECT_THROW(ModelBased{b}, Error);
+  }
+  ModelBased c(o);
+  MetricFrame all_invalid = Uniform(1000.0f);
+  all_invalid.flags.Fill(PixelFlags(Flag::kInvalid));
+  EXPECT_EQ(c.Update(all_invalid), 40);  // nothing usable: unchanged
 }
 
 }  // namespace

@@ -284,6 +284,18 @@ TEST(ExperimentsTest, ControllersDefaultHoldsTheSetPointTheOldDefaultsDidNot) {
   EXPECT_LT(m(old, "steady_state_error_in_reach"), 1.0);
   EXPECT_GT(m(old, "steady_state_error_in_reach"), 3.0 * m(inc, "steady_state_error_in_reach"));
   EXPECT_LE(m(inc, "reversals"), 5.0);
+  // The model-based controller (issue 18's targets; predictions, nothing was tuned to this
+  // scene: its constants are the documented defaults): once more than 1 % of the pixels clip it
+  // takes at most 3 frames to get back under (2 measured), at most 5 % of the frames have more
+  // than 1 % clipped (2 of 150 measured), and it keeps more valid pixels than the paper's law
+  // and the vendor's histogram.
+  const std::string model = "model-based (not in the paper)";
+  EXPECT_LE(m(model, "longest_run_over_1pct_saturated"), 3.0);
+  EXPECT_LE(m(model, "frames_over_1pct_saturated"), 0.05 * m(model, "frames"));
+  for (const std::string other : {"may-proportional (scheduled V_p)",
+                                  "may-proportional (sweep set point)", "vendor-histogram"}) {
+    EXPECT_GT(m(model, "mean_valid"), m(other, "mean_valid")) << other;
+  }
   // Every controller stays within the 30-frames/s registers.
   for (const auto& [key, value] : r.metrics) {
     if (key.size() > 13 && key.substr(key.size() - 13) == ".register_max") {

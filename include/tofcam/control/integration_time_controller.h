@@ -37,6 +37,19 @@
 ///    limited to ±vendor_max_step_register per frame, no change while |x - desired_pos| <=
 ///    vendor_deadband, clamped to the bounds.
 ///  - Fixed: always c_0.
+///  - ModelBased (not in the paper; docs/controllers.md): intensity and amplitude grow in
+///    proportion to the integration time (signal, ambient and dark charge are all integrated;
+///    tof-notes §2), so one frame predicts every pixel's brightest tap, I + A, at any register:
+///    peak(c') = peak(c) c' / c. The longest exposure gives every pixel the most amplitude and so
+///    the smallest ΔL (σ ∝ 1/sqrt(t)), as long as it does not clip: the law takes the q-quantile
+///    of peak (q = 1 - max_clipped_fraction over the ROI) to model_headroom x clipped_intensity,
+///    c' = c * model_headroom * clipped_intensity / peak_q. Pixels clipped now have no measured
+///    peak: when more than max_clipped_fraction of them are clipped the register is divided by
+///    model_backoff, or by 2 when at most 5 x max_clipped_fraction are (the model then finishes
+///    the job from an unclipped frame). Steps up are
+///    limited to a factor model_max_increase per frame; changes under model_deadband (relative)
+///    are not made, so noise does not make it hunt. Without an intensity channel the amplitude
+///    is the peak.
 ///
 /// A frame with no usable pixel in the ROI leaves the register unchanged.
 
@@ -45,19 +58,26 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "tofcam/core/camera.h"
 #include "tofcam/core/frame.h"
 
 namespace tofcam {
 
-enum class ControllerKind { kMayProportional, kMayIncremental, kVendorHistogram, kFixed };
+enum class ControllerKind {
+  kMayProportional,
+  kMayIncremental,
+  kVendorHistogram,
+  kFixed,
+  kModelBased
+};
 
 /// Register units of intensity at which a pixel counts as clipped by default: 98 % of full scale,
 /// as SaturationOptions::max_peak.
 inline constexpr double kDefaultClippedIntensity = 64221.0;
 
-/// "may-proportional", "may-incremental", "vendor-histogram", "fixed".
+/// "may-proportional", "may-incremental", "vendor-histogram", "fixed", "model-based".
 [[nodiscard]] std::string_view ControllerKindName(ControllerKind kind) noexcept;
 /// Inverse of ControllerKindName; throws Error(kInvalidArgument) naming the unknown kind.
 [[nodiscard]] ControllerKind ParseControllerKind(std::string_view name);
@@ -105,6 +125,19 @@ struct ControllerOptions {
   double vendor_gain = 0.5;           ///< Fraction of the predicted step taken per frame, (0, 1].
   int vendor_max_step_register = 20;  ///< Largest change per frame, registers, >= 1.
   int vendor_deadband = 2;            ///< No change while |x - desired_pos| <= this, [0, 254].
+  // ModelBased (see above).
+  /// Fraction of ROI pixels allowed to clip, [0, 0.5].
+  double max_clipped_fraction = 0.01;
+  /// The peak quantile is placed at this fraction of clipped_intensity, (0, 1].
+  double model_headroom = 0.85;
+  /// Largest factor up per frame, [1, 1000]. As large as the back-off: the prediction from an
+  /// unclipped frame is exact on a proportional plant, the limit only guards against frames
+  /// whose pixels are all near zero.
+  double model_max_increase = 8.0;
+  /// Factor down when more than max_clipped_fraction of the pixels clip now, (1, 1000].
+  double model_backoff = 8.0;
+  /// Relative changes smaller than this are not made, [0, 0.5].
+  double model_deadband = 0.05;
 
   /// Throws Error(kInvalidArgument) naming the field when a value is out of range or not finite.
   void Validate() const;
@@ -150,6 +183,23 @@ class MayIncremental final : public IntegrationTimeController {
  private:
   ControllerOptions options_;
   double state_;
+};
+
+/// The model-based exposure law above (stateful: the register as a real number).
+class ModelBased final : public IntegrationTimeController {
+ public:
+  explicit ModelBased(const ControllerOptions& options);
+  int Update(const MetricFrame& frame) override;
+  [[nodiscard]] std::string_view Name() const override;
+  void Reset(int current_register) override;
+  /// Fraction of usable ROI pixels clipped in the last frame, [0, 1] (0 before the first).
+  [[nodiscard]] double last_clipped_fraction() const noexcept { return last_clipped_fraction_; }
+
+ private:
+  ControllerOptions options_;
+  double state_;
+  double last_clipped_fraction_ = 0.0;
+  std::vector<float> peaks_;  // scratch, reused per frame
 };
 
 /// The CSEM/MESA 8-bit histogram auto-exposure with the damped multiplicative step above.
