@@ -45,6 +45,17 @@ void VisitOptions(V& v, PipelineOptions& o) {
   v.Section("calibration", "Stage 2: per-pixel offsets, eq. 1 (tofcam calibrate writes them)", [&] {
     v.Field("file", o.calibration_file, "calibration file, \"\" = none; relative to this file");
   });
+  v.Section("scattering", "compensation of in-camera scattering, before stage 1 (not in the paper)",
+            [&] {
+              // Two lobes in the file; a lobe of weight 0 does nothing.
+              if (o.scattering.lobes.size() < 2) o.scattering.lobes.resize(2, {0.0, 8.0});
+              v.Field("enabled", o.scattering_enabled, "");
+              v.Field("iterations", o.scattering.iterations, "fixed-point iterations, [1, 20]");
+              v.Field("weight_1", o.scattering.lobes[0].weight, "fraction of light, [0, 0.5)");
+              v.Field("sigma_1_px", o.scattering.lobes[0].sigma_px, "pixels, (0, 1000]");
+              v.Field("weight_2", o.scattering.lobes[1].weight, "fraction of light, [0, 0.5)");
+              v.Field("sigma_2_px", o.scattering.lobes[1].sigma_px, "pixels, (0, 1000]");
+            });
   v.Section("accuracy", "Stage 3: predicted inaccuracy ΔL, eq. 2", [&] {
     v.Field("enabled", o.accuracy_enabled, "compute ΔL (the accuracy filter needs it)");
     v.Field("scale", Measured<double>{o.accuracy.scale, defaults.accuracy.scale},

@@ -20,6 +20,7 @@ void PipelineOptions::Validate() const {
   ValidateSection("calibration", [&] {
     if (calibration) calibration->Validate();
   });
+  ValidateSection("scattering", [&] { scattering.Validate(); });
   ValidateSection("accuracy", [&] { accuracy.Validate(); });
   ValidateSection("filters.range", [&] { filters.range.Validate(); });
   ValidateSection("filters.amplitude", [&] { filters.amplitude.Validate(); });
@@ -97,7 +98,12 @@ Pipeline::~Pipeline() = default;
 Pipeline::Pipeline(Pipeline&&) noexcept = default;
 Pipeline& Pipeline::operator=(Pipeline&&) noexcept = default;
 
-void Pipeline::Process(const Frame& frame, PipelineResult& result) {
+void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
+  // Scattering happens in the optics, before anything the camera computes: it is undone first.
+  if (options_.scattering_enabled) {
+    CompensateScatteringInto(camera_frame, options_.scattering, compensated_);
+  }
+  const Frame& frame = options_.scattering_enabled ? compensated_ : camera_frame;
   if (frame.width() != camera_.width() || frame.height() != camera_.height()) {
     throw Error(ErrorCode::kMismatch, "frame is " + std::to_string(frame.width()) + "x" +
                                           std::to_string(frame.height()) + ", the camera " +

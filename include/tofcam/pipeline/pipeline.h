@@ -32,6 +32,7 @@
 #include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/spatial_filter.h"
 #include "tofcam/filters/temporal_filter.h"
+#include "tofcam/optics/scattering.h"
 #include "tofcam/pipeline/frame_stats.h"
 #include "tofcam/pipeline/metric_conversion.h"
 
@@ -47,6 +48,12 @@ struct PipelineOptions {
   std::string calibration_file;
   /// A loaded calibration; takes precedence over `calibration_file`. Must fit the camera.
   std::optional<OffsetCalibration> calibration;
+
+  /// Scattering compensation on the camera's registers before every other stage
+  /// (tofcam/optics/scattering.h; not in the paper). Off by default; the lobes come from
+  /// EstimateScatteringPsf on a calibration scene.
+  bool scattering_enabled = false;
+  ScatteringOptions scattering;
 
   /// Compute ΔL (eq. 2) per pixel. Needed by the accuracy filter and the mean-ΔL statistic.
   bool accuracy_enabled = true;
@@ -159,7 +166,9 @@ class Pipeline {
   std::optional<DenseDistanceCorrection> table_;  // the calibration's, resampled once
   std::unique_ptr<IntegrationTimeController> controller_;
   std::optional<TemporalFilter> temporal_;
-  Image<float> smoothed_;  // the smoothing's output, swapped with the frame's distances
+  Image<float> smoothed_;
+  Frame compensated_;  // the scattering compensation's output, reused per frame  // the smoothing's
+                       // output, swapped with the frame's distances
 };
 
 }  // namespace tofcam
