@@ -462,6 +462,7 @@ void SetupRunCommand(CLI::App& app) {
   sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
   sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
   sub->add_flag("--real-time", o->source.real_time, "Throttle to the camera's frame rate");
+  sub->add_flag("--loop", o->source.loop, "Loop finite sources (playback, imports)");
   sub->add_option("--fps", o->fps,
                   "Frame rate the integration time must leave, Hz (0 = the camera's maximum, "
                   "SR-2: 30); overrides the config's controller.frame_rate_hz");

@@ -77,6 +77,8 @@ struct Ros2Publisher::Impl {
   bool started = false;
   std::int64_t wall0_ns = 0;
   std::int64_t first_timestamp_ns = 0;
+  std::int64_t last_timestamp_ns = 0;
+  std::int64_t last_stamp_ns = 0;
   std::uint64_t published = 0;
   std::uint64_t rejected = 0;
   // Reused between frames.
@@ -132,15 +134,20 @@ void Ros2Publisher::Publish(const PipelineResult& result, const Image<Rgb8>& fal
                             const Ros2ControllerState& controller) {
   Impl& m = *impl_;
   const MetricFrame& frame = result.frame;
-  if (!m.started) {
-    m.wall0_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                     std::chrono::system_clock::now().time_since_epoch())
-                     .count();
+  // Anchor the camera's clock to the wall clock at the first frame, and again when the camera's
+  // timestamps go backwards (a looping playback), so stamps never decrease.
+  if (!m.started || frame.info.timestamp_ns <= m.last_timestamp_ns) {
+    const std::int64_t now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                    std::chrono::system_clock::now().time_since_epoch())
+                                    .count();
+    m.wall0_ns = m.started ? std::max(now_ns, m.last_stamp_ns + 1) : now_ns;
     m.first_timestamp_ns = frame.info.timestamp_ns;
     m.started = true;
   }
+  m.last_timestamp_ns = frame.info.timestamp_ns;
   const Header header{m.wall0_ns + (frame.info.timestamp_ns - m.first_timestamp_ns),
                       m.options.frame_id};
+  m.last_stamp_ns = header.stamp_ns;
   if (!result.cloud.empty()) {
     MakePointCloud2Into(result.cloud, header, m.cloud);
     sensor_msgs_msg_dds__PointCloud2_ c{};

@@ -243,6 +243,36 @@ TEST(Ros2Publisher, RemoteCommandsSetTheRegisterAndTheSetPoint) {
   fs::remove_all(dir);
 }
 
+TEST(Ros2Publisher, StampsIncreaseWhenTheSourcesTimestampsDoNot) {
+  // A looping single-frame import repeats timestamp 0: the stamps must still increase.
+  const int domain = ClaimDomain();
+  ASSERT_GE(domain, 0);
+  UseLoopbackOnly();
+  const fs::path dir = ScratchDir("loop");
+  fs::create_directories(dir / "probe");
+  Child probe = Spawn(
+      {TOFCAM_ROS2_PROBE, "--domain", std::to_string(domain), "--namespace", "/t15/loop", "--count",
+       "4", "--timeout-s", "60", "--reliable", "1", "--out", (dir / "probe").string()},
+      (dir / "probe.log").string());
+  Child run =
+      Spawn({TOFCAM_CLI, "run", "--camera",
+             "import:azure-kinect:" + std::string(TOFCAM_TEST_DATA_DIR) + "/real/azure_kinect",
+             "--loop", "--frames", "4", "--out", (dir / "run").string(), "--ros2", "--ros2-domain",
+             std::to_string(domain), "--ros2-namespace", "/t15/loop", "--ros2-reliable",
+             "--ros2-wait-subscribers", "1", "--ros2-wait-s", "30"},
+            (dir / "run.log").string());
+  ASSERT_EQ(Wait(run), 0) << ReadText(dir / "run.log");
+  ASSERT_EQ(Wait(probe), 0) << ReadText(dir / "probe.log");
+  EXPECT_EQ(CsvColumn(dir / "run" / "frames.csv", "timestamp_s"),
+            std::vector<double>(4, 0.0));  // the source's timestamps: all 0
+  std::istringstream list(ReadText(dir / "probe" / "clouds.txt"));
+  std::vector<long long> stamps;
+  for (std::string line; std::getline(list, line);) stamps.push_back(std::stoll(line));
+  ASSERT_EQ(stamps.size(), 4u);
+  for (int k = 1; k < 4; ++k) EXPECT_GT(stamps[k], stamps[k - 1]);
+  fs::remove_all(dir);
+}
+
 TEST(Ros2Publisher, NoSubscriberIsAClearTimeoutNotAHang) {
   const int domain = ClaimDomain();
   ASSERT_GE(domain, 0);

@@ -70,8 +70,9 @@ class Ros2Publisher {
 
   /// Publishes one processed frame. Stamps: the wall-clock time at the first Publish, plus the
   /// frame's timestamp minus the first frame's (so they advance exactly as the camera's
-  /// timestamps). `false_color` is published as is (any size). Throws Error(kIo) when DDS
-  /// refuses a sample.
+  /// timestamps); re-anchored to the wall clock when a timestamp does not advance (a looping
+  /// playback), so stamps always increase. `false_color` is published as is (any size). Throws
+  /// Error(kIo) when DDS refuses a sample.
   void Publish(const PipelineResult& result, const Image<Rgb8>& false_color,
                const Ros2ControllerState& controller);
 
