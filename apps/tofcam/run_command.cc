@@ -316,6 +316,9 @@ void RunRun(const RunOptions& o) {
     last_timestamp_ns = frame->info.timestamp_ns;
     pipeline.Process(*frame, result);
     if (controlling) camera->SetIntegrationTimeRegister(result.next_integration_register);
+    if (result.next_modulation_frequency_hz != frame->info.modulation_frequency_hz) {
+      camera->SetModulationFrequencyHz(result.next_modulation_frequency_hz);  // dual frequency
+    }
 #ifdef TOFCAM_WITH_ROS2
     if (ros2) {
       const Clock::time_point publish_start = Clock::now();

@@ -132,6 +132,16 @@ void VisitOptions(V& v, PipelineOptions& o) {
             "rejected frames before a pixel is forgotten, [0, 255]");
     v.Field("fallback_sigma_m", o.temporal.fallback_sigma_m, "σ where ΔL is missing, m, > 0");
   });
+  v.Section("frame_pair", "dual-frequency unwrapping of consecutive frames (not in the paper)",
+            [&] {
+              v.Field("enabled", o.frame_pair_enabled, "needs accuracy.enabled");
+              v.Field("alternate_modulation_frequency_hz", o.alternate_modulation_frequency_hz,
+                      "Hz; 0 = do not alternate; e.g. 17000000 with a 20 MHz camera");
+              v.Field("max_range_m", o.frame_pair.max_range_m, "m, (0, 1000]");
+              v.Field("max_disagreement_sigma", o.frame_pair.max_disagreement_sigma,
+                      "kInconsistent beyond this many combined σ, (0, 1000]");
+              v.Field("min_tolerance_m", o.frame_pair.min_tolerance_m, "m, [0, 10]");
+            });
   v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");
     v.Field("kind", o.controller.kind,

@@ -35,6 +35,18 @@ void PipelineOptions::Validate() const {
   }
   ValidateSection("smoothing", [&] { smoothing.Validate(); });
   ValidateSection("temporal", [&] { temporal.Validate(); });
+  ValidateSection("frame_pair", [&] {
+    frame_pair.Validate();
+    if (!(alternate_modulation_frequency_hz >= 0.0) ||
+        !std::isfinite(alternate_modulation_frequency_hz)) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "alternate_modulation_frequency_hz must be 0 (none) or a frequency > 0");
+    }
+  });
+  if (frame_pair_enabled && !accuracy_enabled) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "frame_pair.enabled needs accuracy.enabled (the combination weights by ΔL)");
+  }
   ValidateSection("controller", [&] { controller.Validate(); });
   ValidateSection("false_color", [&] { color.Validate(); });
   ValidateSection("stats", [&] { stats.Validate(); });
@@ -88,6 +100,7 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
   }
   if (options_.controller_enabled) controller_ = MakeController(c);
   if (options_.temporal_enabled) temporal_.emplace(options_.temporal);
+  if (options_.frame_pair_enabled) pair_.emplace(options_.frame_pair);
 
   options_.stats.intensity_roi = c.roi;
   options_.stats.intensity_exclude_flags = c.exclude_flags;
@@ -117,8 +130,8 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
       filters.flying_pixel_enabled || filters.jump_edge_enabled || filters.weingarten_enabled;
   // Smoothing and the temporal filter change distances after the filters: the cloud follows.
   const bool confidence = filters.confidence_enabled && !frame.confidence.empty();
-  const bool late_cloud =
-      neighbourhood || confidence || options_.smoothing_enabled || temporal_.has_value();
+  const bool late_cloud = neighbourhood || confidence || options_.smoothing_enabled ||
+                          temporal_.has_value() || pair_.has_value();
   MetricFrame& m = result.frame;
   pipeline_internal::FusedStages s;
   s.metric = options_.metric;
@@ -140,6 +153,9 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
     ConfidenceThresholdInto(m, filters.confidence, result.filter_flags);
     MergeFlags(m, result.filter_flags);
   }
+  // Dual-frequency unwrapping: after the per-pixel filters (each frame's own ΔL judged it),
+  // before the neighbourhood filters (which then see unwrapped distances).
+  result.combined = pair_ ? pair_->Process(m) : false;
   if (neighbourhood) {
     // m.flags = input flags | per-pixel filter bits, what the neighbourhood filters must treat
     // as rejected (as in ApplyFilters); they OR into the filter flags.
@@ -160,6 +176,13 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   result.next_integration_register =
       controller_ ? controller_->Update(m) : m.info.integration_time_register;
 
+  result.next_modulation_frequency_hz = m.info.modulation_frequency_hz;
+  if (options_.alternate_modulation_frequency_hz > 0.0) {
+    result.next_modulation_frequency_hz =
+        m.info.modulation_frequency_hz == camera_.modulation_frequency_hz
+            ? options_.alternate_modulation_frequency_hz
+            : camera_.modulation_frequency_hz;
+  }
   result.stats = ComputeFrameStats(m, options_.stats);
   result.stats.next_integration_register = result.next_integration_register;
 }
@@ -176,6 +199,7 @@ int Pipeline::InitialIntegrationRegister() const noexcept {
 
 void Pipeline::ResetTemporal() {
   if (temporal_) temporal_->Reset();
+  if (pair_) pair_->Reset();
 }
 
 void Pipeline::ResetController(int reg) {

@@ -30,6 +30,7 @@
 #include "tofcam/core/frame.h"
 #include "tofcam/core/rgb.h"
 #include "tofcam/filters/filter_set.h"
+#include "tofcam/filters/frame_pair.h"
 #include "tofcam/filters/spatial_filter.h"
 #include "tofcam/filters/temporal_filter.h"
 #include "tofcam/optics/scattering.h"
@@ -71,6 +72,17 @@ struct PipelineOptions {
   bool temporal_enabled = false;
   TemporalFilterOptions temporal;
 
+  /// Dual-frequency unwrapping (tofcam/filters/frame_pair.h; not in the paper): each frame is
+  /// combined with the one before when their modulation frequencies differ, after the
+  /// per-pixel filters. With `alternate_modulation_frequency_hz` > 0 the result asks for the
+  /// camera's frequency and that one in turn (PipelineResult::next_modulation_frequency_hz).
+  /// Needs ΔL (accuracy.enabled). Off by default. A calibration is made at one frequency: frames
+  /// at the other are not calibrated (eq. 1 needs its own L), so use it without one or accept
+  /// the uncalibrated offsets.
+  bool frame_pair_enabled = false;
+  FramePairOptions frame_pair;
+  double alternate_modulation_frequency_hz = 0.0;  ///< Hz, 0 = none; else > 0 and finite.
+
   /// Run the integration-time controller. Off: next_integration_register repeats the frame's.
   bool controller_enabled = true;
   /// Bounds are intersected with the camera's register range by the Pipeline.
@@ -105,6 +117,11 @@ struct PipelineResult {
   FrameStats stats;
   /// Register the controller chose for the next frame, within the camera's range.
   int next_integration_register = 0;
+  /// Modulation frequency for the next frame, Hz: the frame's own unless the pipeline
+  /// alternates frequencies (PipelineOptions::alternate_modulation_frequency_hz).
+  double next_modulation_frequency_hz = 0.0;
+  /// True when this frame was combined with the one before (dual-frequency unwrapping).
+  bool combined = false;
 };
 
 /// The pipeline for one camera. Owns its stages (options, ray table, calibration, controller).
@@ -167,8 +184,9 @@ class Pipeline {
   std::unique_ptr<IntegrationTimeController> controller_;
   std::optional<TemporalFilter> temporal_;
   Image<float> smoothed_;
-  Frame compensated_;  // the scattering compensation's output, reused per frame  // the smoothing's
-                       // output, swapped with the frame's distances
+  Frame compensated_;                      // the scattering compensation's output, reused per frame
+  std::optional<FramePairCombiner> pair_;  // the smoothing's
+                                           // output, swapped with the frame's distances
 };
 
 }  // namespace tofcam

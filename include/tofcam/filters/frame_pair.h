@@ -1,0 +1,87 @@
+#pragma once
+/// \file
+/// Two frames of one scene taken back to back, combined per pixel (not in the paper; issue 18,
+/// docs/beyond.md):
+///  - at two modulation frequencies (e.g. 20 and 17 MHz): **dual-frequency unwrapping**. Each
+///    frame knows its distance only modulo its L; the pair of wrap counts (n1, n2) that makes
+///    d1 + n1 L1 and d2 + n2 L2 agree best gives the distance up to the pair's much longer
+///    unambiguous range (c / (2 gcd(f1, f2)): 50 m for 20/17 MHz);
+///  - at one frequency and two integration times: **HDR**. Where one exposure clipped the other
+///    is used; where both are good they are averaged with weights 1/σ² (σ = each frame's ΔL).
+/// Either way, a pixel whose two distances disagree by more than `max_disagreement_sigma`
+/// combined standard deviations (motion between the frames, multipath that differs between
+/// frequencies, a wrong wrap count) is flagged kInconsistent, and the pixel's ΔL becomes the
+/// combined σ.
+///
+/// Single-frequency wrap detection (WrapCheckFilter) is the fallback where only one frequency
+/// exists.
+
+#include <optional>
+
+#include "tofcam/core/camera_intrinsics.h"
+#include "tofcam/core/frame.h"
+
+namespace tofcam {
+
+struct FramePairOptions {
+  /// Largest distance the unwrapping considers, m, (0, 1000]. Capped at the pair's own
+  /// unambiguous range.
+  double max_range_m = 30.0;
+  /// Disagreement, in combined σ (sqrt(ΔL1² + ΔL2²)), beyond which a pixel is kInconsistent,
+  /// (0, 1000].
+  double max_disagreement_sigma = 4.0;
+  /// Absolute floor of that tolerance, m, [0, 10]: registers quantise and ΔL can be tiny on
+  /// bright pixels.
+  double min_tolerance_m = 0.01;
+
+  void Validate() const;
+};
+
+/// Combines `current` with `previous` in place (see the file comment). Needs ΔL in both frames
+/// (the pipeline's accuracy stage). Pixels with a reject flag in one frame take the other's
+/// value and flags minus that frame's reject bits (HDR: a clipped pixel is replaced) — except
+/// with two frequencies, where one frame alone cannot be unwrapped: such pixels keep their
+/// flags and get kInconsistent. Throws Error(kInvalidArgument) for bad options, empty ΔL, or
+/// frames of different sizes.
+void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
+                      const FramePairOptions& options = {});
+
+/// A stateful wrapper for a stream that alternates frequencies or exposures: Process(frame)
+/// combines each frame with the one before when the two differ in modulation frequency or
+/// integration time and returns true; the first frame of a stream and frames whose settings
+/// repeat the previous are passed through (false).
+class FramePairCombiner {
+ public:
+  /// Throws Error(kInvalidArgument) for bad options.
+  explicit FramePairCombiner(const FramePairOptions& options = {});
+  bool Process(MetricFrame& frame);
+  void Reset() { previous_.reset(); }
+
+ private:
+  FramePairOptions options_;
+  std::optional<MetricFrame> previous_;  // the last frame as it came in (before combining)
+};
+
+struct WrapCheckOptions {
+  /// Quantile of A d² over the valid pixels taken as the brightest surface's value, (0, 1].
+  double envelope_quantile = 0.99;
+  /// A pixel is flagged when its A d² is below margin x envelope x (d / (d + L))², (0, 10].
+  /// Above 1 so that a wrapped surface as bright as the brightest one is caught (at 1 it sits
+  /// exactly on the line); the price: near surfaces darker than margin x (d / (d + L))² of the
+  /// brightest (at 2 m: 7 % with 1.5) are flagged too.
+  double margin = 1.5;
+  void Validate() const;
+};
+
+/// Single-frequency wrap detection: a Lambertian surface's amplitude falls like cos θ / d², so
+/// A d² / cos θ measures its albedo (times one gain for the whole frame); θ, the angle between the
+/// pixel's ray and the surface normal, comes from the neighbours' points (the neighbourhood cue;
+/// floored at cos θ = 0.2). A surface whose true distance is d + L but which reads d is darker by
+/// (d / (d + L))² than the same surface unwrapped; pixels darker than the frame's brightest
+/// surface (its `envelope_quantile`) by that factor are either wrapped or very dark, and are
+/// flagged kInconsistent. Returns only the flags it raises (as every filter). Pixels with a
+/// reject flag are not judged. `rays` must have the frame's size (kMismatch otherwise).
+[[nodiscard]] Image<PixelFlags> WrapCheckFilter(const MetricFrame& frame, const RayTable& rays,
+                                                const WrapCheckOptions& options = {});
+
+}  // namespace tofcam

@@ -1,0 +1,219 @@
+#include "tofcam/filters/frame_pair.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+namespace {
+
+[[noreturn]] void Bad(const std::string& what) { throw Error(ErrorCode::kInvalidArgument, what); }
+
+bool Good(const MetricFrame& f, std::size_t i) {
+  return !f.flags[i].Any(kRejectMask) && std::isfinite(f.radial_distance_m[i]);
+}
+
+// Weight 1/σ², with a usable fallback where ΔL is missing or not positive.
+double Weight(float delta_l) {
+  return std::isfinite(delta_l) && delta_l > 0.0f ? 1.0 / (static_cast<double>(delta_l) * delta_l)
+                                                  : 0.0;
+}
+
+}  // namespace
+
+void FramePairOptions::Validate() const {
+  if (!(max_range_m > 0.0 && max_range_m <= 1000.0)) {
+    Bad("frame pair max_range_m = " + std::to_string(max_range_m) + " must be in (0, 1000]");
+  }
+  if (!(max_disagreement_sigma > 0.0 && max_disagreement_sigma <= 1000.0)) {
+    Bad("frame pair max_disagreement_sigma = " + std::to_string(max_disagreement_sigma) +
+        " must be in (0, 1000]");
+  }
+  if (!(min_tolerance_m >= 0.0 && min_tolerance_m <= 10.0)) {
+    Bad("frame pair min_tolerance_m = " + std::to_string(min_tolerance_m) + " must be in [0, 10]");
+  }
+}
+
+void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
+                      const FramePairOptions& options) {
+  options.Validate();
+  const int w = current.width(), h = current.height();
+  if (previous.width() != w || previous.height() != h || !previous.flags.SameSize(w, h) ||
+      !current.flags.SameSize(w, h)) {
+    Bad("frame pair: the two frames differ in size");
+  }
+  if (!previous.delta_l_m.SameSize(w, h) || !current.delta_l_m.SameSize(w, h)) {
+    Bad("frame pair: both frames need ΔL (enable the accuracy stage)");
+  }
+  const double f1 = previous.info.modulation_frequency_hz;
+  const double f2 = current.info.modulation_frequency_hz;
+  if (!(f1 > 0.0) || !(f2 > 0.0)) Bad("frame pair: modulation frequencies must be > 0");
+  const double l1 = UnambiguousRangeM(f1), l2 = UnambiguousRangeM(f2);
+  const bool dual = f1 != f2;
+  double range = options.max_range_m;
+  if (dual) {
+    const long long g = std::gcd(std::llround(f1), std::llround(f2));
+    if (g > 0) range = std::min(range, UnambiguousRangeM(static_cast<double>(g)));
+  }
+  const int max_n1 = dual ? static_cast<int>(std::floor(range / l1)) : 0;
+  const std::size_t n = current.radial_distance_m.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool ok1 = Good(previous, i), ok2 = Good(current, i);
+    if (!ok1 && !ok2) continue;
+    if (!ok1 || !ok2) {
+      if (dual) {
+        current.flags[i] |= Flag::kInconsistent;  // one phase alone cannot be unwrapped
+      } else if (ok1) {
+        // HDR: the other exposure clipped or failed here; this one did not.
+        current.radial_distance_m[i] = previous.radial_distance_m[i];
+        current.amplitude[i] = previous.amplitude[i];
+        if (current.has_intensity() && previous.has_intensity()) {
+          current.intensity[i] = previous.intensity[i];
+        }
+        current.delta_l_m[i] = previous.delta_l_m[i];
+        current.flags[i] = previous.flags[i];
+      }
+      continue;
+    }
+    const double d1 = previous.radial_distance_m[i], d2 = current.radial_distance_m[i];
+    const double s1 = previous.delta_l_m[i], s2 = current.delta_l_m[i];
+    double a = d1, b = d2;
+    if (dual) {
+      double best = 1e300;
+      for (int n1 = 0; n1 <= max_n1; ++n1) {
+        const double e1 = d1 + n1 * l1;
+        const double n2 = std::max(0.0, std::round((e1 - d2) / l2));
+        const double e2 = d2 + n2 * l2;
+        if (std::abs(e1 - e2) < best) {
+          best = std::abs(e1 - e2);
+          a = e1;
+          b = e2;
+        }
+      }
+    } else {
+      a = d1 - l1 * std::round((d1 - d2) / l1);  // the same surface near the 0 / L seam
+    }
+    const double tolerance = std::max(options.max_disagreement_sigma * std::sqrt(s1 * s1 + s2 * s2),
+                                      options.min_tolerance_m);
+    if (!(std::abs(a - b) <= tolerance)) {
+      current.flags[i] |= Flag::kInconsistent;
+      if (dual) current.radial_distance_m[i] = static_cast<float>(b);
+      continue;
+    }
+    const double w1 = Weight(previous.delta_l_m[i]), w2 = Weight(current.delta_l_m[i]);
+    const double sum = w1 + w2;
+    current.radial_distance_m[i] =
+        static_cast<float>(sum > 0.0 ? (w1 * a + w2 * b) / sum : 0.5 * (a + b));
+    if (sum > 0.0) current.delta_l_m[i] = static_cast<float>(1.0 / std::sqrt(sum));
+  }
+}
+
+FramePairCombiner::FramePairCombiner(const FramePairOptions& options) : options_(options) {
+  options_.Validate();
+}
+
+bool FramePairCombiner::Process(MetricFrame& frame) {
+  const bool differs =
+      previous_.has_value() &&
+      (previous_->info.modulation_frequency_hz != frame.info.modulation_frequency_hz ||
+       previous_->info.integration_time_register != frame.info.integration_time_register) &&
+      previous_->width() == frame.width() && previous_->height() == frame.height();
+  if (!differs) {
+    previous_ = frame;
+    return false;
+  }
+  MetricFrame incoming = frame;
+  CombineFramePair(*previous_, frame, options_);
+  previous_ = std::move(incoming);
+  return true;
+}
+
+void WrapCheckOptions::Validate() const {
+  if (!(envelope_quantile > 0.0 && envelope_quantile <= 1.0)) {
+    Bad("wrap check envelope_quantile = " + std::to_string(envelope_quantile) +
+        " must be in (0, 1]");
+  }
+  if (!(margin > 0.0 && margin <= 10.0)) {
+    Bad("wrap check margin = " + std::to_string(margin) + " must be in (0, 10]");
+  }
+}
+
+Image<PixelFlags> WrapCheckFilter(const MetricFrame& frame, const RayTable& rays,
+                                  const WrapCheckOptions& options) {
+  options.Validate();
+  const int w = frame.width(), h = frame.height();
+  if (w <= 0 || h <= 0 || !frame.amplitude.SameSize(w, h) || !frame.flags.SameSize(w, h)) {
+    Bad("wrap check: empty frame or channels of different sizes");
+  }
+  if (!rays.x.SameSize(w, h) || !rays.y.SameSize(w, h) || !rays.z.SameSize(w, h)) {
+    throw Error(ErrorCode::kMismatch, "wrap check: the ray table differs in size from the frame");
+  }
+  Image<PixelFlags> out(w, h);
+  const double range = UnambiguousRangeM(frame.info.modulation_frequency_hz);
+  auto point = [&](int r, int c, double p[3]) {
+    const std::size_t i = static_cast<std::size_t>(r) * w + c;
+    const double d = frame.radial_distance_m[i];
+    p[0] = d * rays.x[i];
+    p[1] = d * rays.y[i];
+    p[2] = d * rays.z[i];
+  };
+  // cos θ from the cross product of the differences to a horizontal and a vertical neighbour
+  // (whichever side is good); 1 where no neighbours are good.
+  auto cosine = [&](int r, int c) {
+    const std::size_t i = static_cast<std::size_t>(r) * w + c;
+    const int cn =
+        c + 1 < w && Good(frame, i + 1) ? c + 1 : (c > 0 && Good(frame, i - 1) ? c - 1 : -1);
+    const int rn = r + 1 < h && Good(frame, i + static_cast<std::size_t>(w))
+                       ? r + 1
+                       : (r > 0 && Good(frame, i - static_cast<std::size_t>(w)) ? r - 1 : -1);
+    if (cn < 0 || rn < 0) return 1.0;
+    double p[3], a[3], b[3];
+    point(r, c, p);
+    point(r, cn, a);
+    point(rn, c, b);
+    for (int k = 0; k < 3; ++k) {
+      a[k] -= p[k];
+      b[k] -= p[k];
+    }
+    const double n[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                         a[0] * b[1] - a[1] * b[0]};
+    const double norm = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(norm > 0.0)) return 1.0;
+    const double dot = std::abs(n[0] * rays.x[i] + n[1] * rays.y[i] + n[2] * rays.z[i]) / norm;
+    return std::max(dot, 0.2);
+  };
+  Image<float> albedo(w, h, 0.0f);
+  std::vector<double> brightness;
+  for (int r = 0; r < h; ++r) {
+    for (int c = 0; c < w; ++c) {
+      const std::size_t i = static_cast<std::size_t>(r) * w + c;
+      if (!Good(frame, i) || !(frame.amplitude[i] > 0.0f)) continue;
+      const double d = frame.radial_distance_m[i];
+      albedo[i] = static_cast<float>(frame.amplitude[i] * d * d / cosine(r, c));
+      brightness.push_back(albedo[i]);
+    }
+  }
+  if (brightness.empty()) return out;
+  const std::size_t k = std::min(
+      brightness.size() - 1,
+      static_cast<std::size_t>(options.envelope_quantile * static_cast<double>(brightness.size())));
+  std::nth_element(brightness.begin(), brightness.begin() + static_cast<std::ptrdiff_t>(k),
+                   brightness.end());
+  const double envelope = brightness[k];
+  for (std::size_t i = 0; i < frame.flags.size(); ++i) {
+    if (!Good(frame, i)) continue;
+    const double d = frame.radial_distance_m[i];
+    const double ratio = d / (d + range);
+    if (albedo[i] < options.margin * envelope * ratio * ratio) {
+      out[i] = PixelFlags(Flag::kInconsistent);
+    }
+  }
+  return out;
+}
+
+}  // namespace tofcam

@@ -1,0 +1,125 @@
+#include "tofcam/filters/frame_pair.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam {
+namespace {
+
+// A 2 x 1 frame: both pixels at distance d (wrapped into [0, L)), ΔL sigma.
+MetricFrame Pixels(double f_hz, double d0, double d1, float sigma, int reg = 10) {
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(2, 1);
+  m.amplitude = Image<float>(2, 1, 1000.0f);
+  m.flags = Image<PixelFlags>(2, 1);
+  m.delta_l_m = Image<float>(2, 1, sigma);
+  m.info.modulation_frequency_hz = f_hz;
+  m.info.integration_time_register = reg;
+  const double l = UnambiguousRangeM(f_hz);
+  m.radial_distance_m[0] = static_cast<float>(std::fmod(d0, l));
+  m.radial_distance_m[1] = static_cast<float>(std::fmod(d1, l));
+  return m;
+}
+
+TEST(FramePair, DualFrequencyUnwrapsBeyondBothRanges) {
+  // A surface at 9 m reads 9 - L(20 MHz) = 1.505 m at 20 MHz and 9 - L(17 MHz) = 0.183 m at
+  // 17 MHz; only the wrap counts (1, 1) make the two agree, at 9 m. Pixel 1 at 21.3 m needs
+  // (2, 2). Equal σ: the result is the mean, σ / sqrt(2).
+  const MetricFrame a = Pixels(20e6, 9.0, 21.3, 0.01f);
+  MetricFrame b = Pixels(17e6, 9.0, 21.3, 0.01f);
+  CombineFramePair(a, b);
+  EXPECT_NEAR(b.radial_distance_m[0], 9.0, 1e-5);
+  EXPECT_NEAR(b.radial_distance_m[1], 21.3, 1e-5);
+  EXPECT_NEAR(b.delta_l_m[0], 0.01 / std::sqrt(2.0), 1e-7);
+  EXPECT_FALSE(b.flags[0].Any(kRejectMask));
+}
+
+TEST(FramePair, DisagreementBeyondItsSigmaIsInconsistent) {
+  // Second pixel moved 0.2 m between the frames; 4 σ of sqrt(2) x 1 cm is 5.7 cm.
+  const MetricFrame a = Pixels(20e6, 3.0, 3.0, 0.01f);
+  MetricFrame b = Pixels(17e6, 3.0, 3.2, 0.01f);
+  CombineFramePair(a, b);
+  EXPECT_FALSE(b.flags[0].Has(Flag::kInconsistent));
+  EXPECT_TRUE(b.flags[1].Has(Flag::kInconsistent));
+  // One frequency alone cannot be unwrapped: a pixel rejected in one frame is inconsistent.
+  MetricFrame c = Pixels(20e6, 3.0, 3.0, 0.01f);
+  c.flags[0] = PixelFlags(Flag::kSaturated);
+  MetricFrame d = Pixels(17e6, 3.0, 3.0, 0.01f);
+  CombineFramePair(c, d);
+  EXPECT_TRUE(d.flags[0].Has(Flag::kInconsistent));
+}
+
+TEST(FramePair, HdrTakesTheOtherExposureWhereOneClippedAndWeightsBySigma) {
+  // Long exposure (previous): σ 1 cm; short exposure (current): σ 3 cm, 2 cm further off.
+  // Weights 1/σ²: (3.00 / 1e-4 + 3.02 / 9e-4) / (1/1e-4 + 1/9e-4) = 3.002 m.
+  const MetricFrame longer = Pixels(20e6, 3.0, 5.0, 0.01f, 40);
+  MetricFrame shorter = Pixels(20e6, 3.02, 5.0, 0.03f, 10);
+  shorter.flags[1] = PixelFlags(Flag::kSaturated);  // clipped here: the long one is used
+  shorter.radial_distance_m[1] = 0.0f;
+  CombineFramePair(longer, shorter);
+  EXPECT_NEAR(shorter.radial_distance_m[0], 3.002, 1e-5);
+  EXPECT_NEAR(shorter.delta_l_m[0], 1.0 / std::sqrt(1e4 + 1e4 / 9.0), 1e-7);
+  EXPECT_NEAR(shorter.radial_distance_m[1], 5.0, 1e-6);
+  EXPECT_FALSE(shorter.flags[1].Any(kRejectMask));
+}
+
+TEST(FramePairCombiner, CombinesOnlyWhenSettingsAlternate) {
+  FramePairCombiner combiner;
+  MetricFrame a = Pixels(20e6, 9.0, 9.0, 0.01f);
+  MetricFrame b = Pixels(17e6, 9.0, 9.0, 0.01f);
+  MetricFrame c = Pixels(20e6, 9.0, 9.0, 0.01f);
+  MetricFrame c2 = c;
+  EXPECT_FALSE(combiner.Process(a));  // first frame
+  EXPECT_TRUE(combiner.Process(b));
+  EXPECT_NEAR(b.radial_distance_m[0], 9.0, 1e-5);
+  EXPECT_TRUE(combiner.Process(c));  // combined with b as it came in (0.183 m), not 9 m
+  EXPECT_NEAR(c.radial_distance_m[0], 9.0, 1e-5);
+  EXPECT_FALSE(combiner.Process(c2));  // same settings as the frame before: passed through
+}
+
+TEST(WrapCheck, FlagsSurfacesTooDarkForTheirDistance) {
+  // Pixel 0: a white wall at 2 m. Pixel 1: the same wall at 9.5 m, read as 2.005 m at 20 MHz,
+  // amplitude (2/9.5)² of pixel 0's: exactly on the line for margin 1, below it for the
+  // default 1.5. Pixel 2: a 60 % grey surface at 2 m: kept.
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(3, 1);
+  m.amplitude = Image<float>(3, 1);
+  m.flags = Image<PixelFlags>(3, 1);
+  m.info.modulation_frequency_hz = 20e6;
+  const double l = UnambiguousRangeM(20e6);
+  m.radial_distance_m[0] = 2.0f;
+  m.amplitude[0] = 4000.0f;
+  m.radial_distance_m[1] = static_cast<float>(9.5 - l);
+  m.amplitude[1] = static_cast<float>(4000.0 * (2.0 / 9.5) * (2.0 / 9.5));
+  m.radial_distance_m[2] = 2.0f;
+  m.amplitude[2] = 2400.0f;
+  WrapCheckOptions o;
+  o.envelope_quantile = 1.0;  // the white wall is the brightest surface
+  // Rays along the optical axis and isolated pixels (no neighbour in the next row): cos θ = 1.
+  RayTable rays{Image<float>(3, 1, 0.0f), Image<float>(3, 1, 0.0f), Image<float>(3, 1, 1.0f)};
+  const Image<PixelFlags> f = WrapCheckFilter(m, rays, o);
+  EXPECT_FALSE(f[0].Has(Flag::kInconsistent));
+  EXPECT_TRUE(f[1].Has(Flag::kInconsistent));
+  EXPECT_FALSE(f[2].Has(Flag::kInconsistent));
+}
+
+TEST(FramePair, BadInputIsAClearError) {
+  MetricFrame a = Pixels(20e6, 1, 1, 0.01f);
+  MetricFrame b = Pixels(17e6, 1, 1, 0.01f);
+  b.delta_l_m = Image<float>();
+  EXPECT_THROW(CombineFramePair(a, b), Error);
+  FramePairOptions o;
+  o.max_disagreement_sigma = 0;
+  EXPECT_THROW(FramePairCombiner{o}, Error);
+  WrapCheckOptions w;
+  w.margin = 0;
+  RayTable rays{Image<float>(2, 1, 0.0f), Image<float>(2, 1, 0.0f), Image<float>(2, 1, 1.0f)};
+  EXPECT_THROW((void)WrapCheckFilter(a, rays, w), Error);
+}
+
+}  // namespace
+}  // namespace tofcam
