@@ -1,0 +1,34 @@
+#pragma once
+// Shared by the simulator's stages (internal to tofcam::sim): the function-multiversioning
+// attribute of the hot row loops and the "no hit" distance.
+
+#include <limits>
+
+namespace tofcam::sim::internal {
+
+inline constexpr float kInf = std::numeric_limits<float>::infinity();
+
+}  // namespace tofcam::sim::internal
+
+// The hot row loops below are compiled twice, for the x86-64 baseline (SSE2) and for AVX2, and
+// the dynamic loader picks one for the CPU (GCC/Clang function multiversioning); the library
+// stays built for the baseline. Both clones do the same IEEE operations in the same order (ISO
+// C++ mode contracts no FMAs, AVX2 alone enables none), so results do not depend on the CPU.
+// Not under AddressSanitizer, whose run time starts after the loader has called the ifunc
+// resolvers that pick the clones.
+#if defined(__SANITIZE_ADDRESS__)
+#define TOFCAM_SIM_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define TOFCAM_SIM_ASAN 1
+#endif
+#endif
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(TOFCAM_SIM_ASAN)
+#define TOFCAM_SIM_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define TOFCAM_SIM_CLONES
+#endif
+
+// The loops below take __restrict pointers: without them GCC needs more run-time alias checks
+// than it is willing to emit and leaves them scalar. They are kept out of line (noinline),
+// because GCC forgets the __restrict of parameters once a function is inlined into a caller.

@@ -1,0 +1,146 @@
+// Stage 4 of the simulator (src/sim/sensor.h): tap means, demodulation, ground-truth causes and
+// saturation with blooming against hand-computed values.
+#include "sensor.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "tofcam/core/pixel_flags.h"
+#include "tofcam/core/units.h"
+
+namespace tofcam::sim::internal {
+namespace {
+
+TEST(SensorTest, PixelMeansWithoutSystematicErrorsAreThePhasorTimesTheIntegrationTime) {
+  SensorConstants k;
+  k.t_int_s = 0.01;
+  k.dark_e = 50;
+  k.m_to_rad = 2 * kPi / 7.5;
+  const float re[2] = {3000, 0}, im[2] = {4000, 0}, dc[2] = {20000, 100};
+  const float zero[2] = {0, 0};
+  double a[2], b[2], cs[2], sn[2], shift[2];
+  PixelMeans(k, 2, re, im, dc, zero, zero, zero, zero, a, b, cs, sn, shift);
+  EXPECT_NEAR(a[0], 50.0, 1e-9);  // |3000 + 4000 i| * 0.01
+  EXPECT_NEAR(b[0], 250.0, 1e-9);
+  EXPECT_NEAR(cs[0], 0.6, 1e-12);
+  EXPECT_NEAR(sn[0], 0.8, 1e-12);
+  EXPECT_EQ(a[1], 0.0);  // no signal: amplitude 0, offset dark plus DC
+  EXPECT_NEAR(b[1], 51.0, 1e-9);
+}
+
+TEST(SensorTest, ADistanceOffsetTurnsThePhasor) {
+  SensorConstants k;
+  k.t_int_s = 1;
+  k.m_to_rad = 2 * kPi / 8.0;
+  const float re[2] = {1, 1}, im[2] = {0, 0}, dc[2] = {2, 2}, zero[2] = {0, 0};
+  const float fpn[2] = {0.05f, 2.0f};  // small (polynomial) and a quarter of L (libm)
+  double a[2], b[2], cs[2], sn[2], shift[2];
+  PixelMeans(k, 2, re, im, dc, zero, zero, zero, fpn, a, b, cs, sn, shift);
+  const double small = 0.05f * 2 * kPi / 8.0;
+  EXPECT_NEAR(cs[0], std::cos(small), 1e-9);
+  EXPECT_NEAR(sn[0], std::sin(small), 1e-9);
+  EXPECT_NEAR(cs[1], 0.0, 1e-12);
+  EXPECT_NEAR(sn[1], 1.0, 1e-12);
+}
+
+TEST(SensorTest, TapMeansAreOffsetPlusAmplitudeTimesShiftedCosine) {
+  SensorRow sr;
+  sr.Resize(1);
+  sr.a[0][0] = 100;
+  sr.b[0][0] = 500;
+  sr.cos_p[0][0] = std::cos(1.0);
+  sr.sin_p[0][0] = std::sin(1.0);
+  TapMeans(1, 1, sr);
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_NEAR(sr.mu[k][0], 500 + 100 * std::cos(1.0 - k * kPi / 2), 1e-9) << k;
+  }
+  EXPECT_EQ(sr.a_mean[0], 100);
+  // Four renderings: tap k from rendering k, means over the four.
+  for (int s = 0; s < 4; ++s) {
+    sr.a[s][0] = 100 + 10 * s;
+    sr.b[s][0] = 500;
+    sr.cos_p[s][0] = 1;
+    sr.sin_p[s][0] = 0;
+  }
+  TapMeans(1, 4, sr);
+  EXPECT_DOUBLE_EQ(sr.mu[0][0], 600);
+  EXPECT_DOUBLE_EQ(sr.mu[2][0], 380);
+  EXPECT_DOUBLE_EQ(sr.a_mean[0], 115);
+}
+
+TEST(SensorTest, DemodulationRecoversPhaseAmplitudeAndOffset) {
+  const double phi = kPi / 3, amp = 100, off = 500;
+  float taps[4];
+  for (int k = 0; k < 4; ++k) taps[k] = static_cast<float>(off + amp * std::cos(phi - k * kPi / 2));
+  const PixelRegisters r = Demodulate(taps, true, 1e5, 1.0, 0);
+  EXPECT_EQ(r.distance, static_cast<std::uint16_t>(std::llround(65536.0 / 6)));
+  EXPECT_EQ(r.amplitude, 100);
+  EXPECT_EQ(r.intensity, 500);
+  EXPECT_FALSE(r.saturated);
+  // The offset register adds modulo 2^16.
+  EXPECT_EQ(Demodulate(taps, true, 1e5, 1.0, 60000).distance,
+            static_cast<std::uint16_t>((std::llround(65536.0 / 6) + 60000) % 65536));
+  // A tap at the full well clips and flags; without clipping it does not.
+  taps[0] = 2e5f;
+  EXPECT_TRUE(Demodulate(taps, true, 1e5, 1.0, 0).saturated);
+  EXPECT_FALSE(Demodulate(taps, false, 1e6, 0.01, 0).saturated);
+  // An intensity beyond the register range clips and flags.
+  const float bright[4] = {3e5f, 3e5f, 3e5f, 3e5f};
+  const PixelRegisters b = Demodulate(bright, false, 1e6, 1.0, 0);
+  EXPECT_EQ(b.intensity, kMaxSignalRegister);
+  EXPECT_TRUE(b.saturated);
+}
+
+TEST(SensorTest, TruthCausesFromTheComponents) {
+  const float inf = std::numeric_limits<float>::infinity();
+  // Pixel 0 direct only; 1 an indirect path at 90 degrees; 2 scattering at 90 degrees;
+  // 3 mixed span; 4 no return; 5 beyond the range.
+  const float re[6] = {1, 1, 1, 1, 0, 1}, im[6] = {0, 1, 0, 0, 0, 0};
+  const float dre[6] = {1, 1, 1, 1, 0, 1}, dim[6] = {0, 0, 0, 0, 0, 0};
+  const float sre[6] = {0, 0, 0, 0, 0, 0}, sim[6] = {0, 0, 1, 0, 0, 0};
+  const float span[6] = {0, 0, 0, 0.2f, 0, 0}, td[6] = {2, 2, 2, 2, inf, 9};
+  std::uint16_t bits[6];
+  const double cos_bias = std::cos(0.01);
+  TruthCauses(6, cos_bias * cos_bias, 1.0, 0.05, 7.5, re, im, dre, dim, sre, sim, span, td, bits);
+  EXPECT_EQ(bits[0], 0);
+  EXPECT_EQ(bits[1], static_cast<std::uint16_t>(Flag::kMultipath));
+  EXPECT_EQ(bits[2], static_cast<std::uint16_t>(Flag::kScattering));
+  EXPECT_EQ(bits[3], static_cast<std::uint16_t>(Flag::kMixed));
+  EXPECT_EQ(bits[4], static_cast<std::uint16_t>(Flag::kNoReturn));
+  EXPECT_EQ(bits[5], static_cast<std::uint16_t>(Flag::kBeyondUnambiguous));
+}
+
+TEST(SensorTest, SaturationClipsAndBloomsTheSpillIntoTheNeighboursConservingCharge) {
+  const int w = 15, h = 15;
+  std::vector<float> taps[4], bloom, tmp;
+  for (auto& t : taps) t.assign(static_cast<std::size_t>(w) * h, 100.f);
+  const std::size_t centre = 7 * w + 7;
+  const float fw = 1000;
+  taps[0][centre] = 1800;  // 800 over the full well
+  taps[1][centre] = 1000;
+  // Nothing bloomed without a bloom share: the excess goes to the drain.
+  {
+    std::vector<float> t2[4] = {taps[0], taps[1], taps[2], taps[3]};
+    EXPECT_FALSE(Saturate(t2, bloom, tmp, w, h, 1.0, fw, 0.0, 0.0, 1, false));
+    EXPECT_EQ(t2[0][centre], fw);
+  }
+  double before = 0;
+  for (const auto& t : taps) before += std::accumulate(t.begin(), t.end(), 0.0);
+  ASSERT_TRUE(Saturate(taps, bloom, tmp, w, h, 1.0, fw, 0.0, 1.0, 1, false));
+  double after = 0;
+  for (const auto& t : taps) after += std::accumulate(t.begin(), t.end(), 0.0);
+  EXPECT_NEAR(after, before, 1e-2);       // sigma 1 px in a 15 px image: nothing leaves it
+  EXPECT_EQ(taps[0][centre] > fw, true);  // it receives its own share of the spill back
+  // Spill is charge, not light: every tap of a neighbour gets the same amount.
+  const std::size_t nb = centre + 1;
+  EXPECT_FLOAT_EQ(taps[0][nb], taps[1][nb]);
+  EXPECT_FLOAT_EQ(taps[2][nb], taps[3][nb]);
+  EXPECT_GT(taps[0][nb], 100.f);
+  EXPECT_FLOAT_EQ(taps[0][0], 100.f);  // 7 px away: beyond the kernel radius of 3 px
+}
+
+}  // namespace
+}  // namespace tofcam::sim::internal
