@@ -123,8 +123,10 @@ void MakeDepthMmImageInto(const PointCloud& cloud, const Header& header, ImageMe
   cloud.Validate();
   InitImage(out, header, cloud.width, cloud.height, "16UC1", 2);
   for (std::size_t i = 0; i < cloud.z.size(); ++i) {
-    const double mm = std::round(static_cast<double>(cloud.z[i]) * 1000.0);
-    const std::uint16_t v = mm >= 1.0 && mm <= 65535.0 ? static_cast<std::uint16_t>(mm) : 0;
+    // Rounded half away from zero (mm >= 0.5 here), without a libm call per pixel.
+    const double mm = static_cast<double>(cloud.z[i]) * 1000.0;
+    const std::uint16_t v =
+        mm >= 0.5 && mm < 65535.5 ? static_cast<std::uint16_t>(mm + 0.5) : std::uint16_t{0};
     std::memcpy(out.data.data() + 2 * i, &v, 2);
   }
 }
@@ -132,9 +134,10 @@ void MakeDepthMmImageInto(const PointCloud& cloud, const Header& header, ImageMe
 void MakeMono16ImageInto(const Image<float>& channel, const Header& header, ImageMessage& out) {
   InitImage(out, header, channel.width(), channel.height(), "16UC1", 2);
   for (std::size_t i = 0; i < channel.size(); ++i) {
+    // NaN -> 0; else clamped to [0, 65535] and rounded half away from zero (non-negative here).
     const float c = channel[i];
-    const std::uint16_t v =
-        std::isnan(c) ? 0 : static_cast<std::uint16_t>(std::clamp(std::round(c), 0.0f, 65535.0f));
+    const float clamped = c >= 0.0f ? (c < 65535.0f ? c : 65535.0f) : 0.0f;
+    const std::uint16_t v = static_cast<std::uint16_t>(clamped + 0.5f);
     std::memcpy(out.data.data() + 2 * i, &v, 2);
   }
 }

@@ -4,15 +4,21 @@
 // results must equal those of the same frame through `import:azure-kinect:`.
 #include "tofcam/ros2/ros2_camera.h"
 
+#include <dds/dds.h>
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "loopback.h"
+#include "sensor_msgs/msg/CameraInfo.h"
+#include "sensor_msgs/msg/Image.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam::ros2_test {
@@ -72,6 +78,123 @@ TEST(Ros2Camera, MissingPublisherIsAClearTimeout) {
               std::string::npos)
         << e.what();
   }
+}
+
+// In-process writers of a 2 x 1 camera's topics, to drive Ros2Camera sample by sample.
+class TinyDriver {
+ public:
+  TinyDriver(int domain, const std::string& ns) {
+    participant_ = dds_create_participant(domain, nullptr, nullptr);
+    dds_qos_t* qos = dds_create_qos();
+    dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+    dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 16);
+    auto writer = [&](const dds_topic_descriptor_t* d, const std::string& name) {
+      return dds_create_writer(
+          participant_,
+          dds_create_topic(participant_, d, ("rt" + ns + "/" + name).c_str(), nullptr, nullptr),
+          qos, nullptr);
+    };
+    depth_ = writer(&sensor_msgs_msg_dds__Image__desc, "depth");
+    amplitude_ = writer(&sensor_msgs_msg_dds__Image__desc, "amplitude");
+    info_ = writer(&sensor_msgs_msg_dds__CameraInfo__desc, "camera_info");
+    dds_delete_qos(qos);
+  }
+  ~TinyDriver() { dds_delete(participant_); }
+
+  bool WaitForReader() {
+    for (int i = 0; i < 1000; ++i) {
+      int matched = 0;
+      for (dds_entity_t w : {depth_, amplitude_, info_}) {
+        dds_publication_matched_status_t st{};
+        dds_get_publication_matched_status(w, &st);
+        matched += st.current_count > 0;
+      }
+      if (matched == 3) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return false;
+  }
+  void Info() {
+    sensor_msgs_msg_dds__CameraInfo_ m{};
+    m.header.frame_id = frame_id_;
+    m.width = 2;
+    m.height = 1;
+    m.distortion_model = model_;
+    const double k[9] = {1, 0, 0.5, 0, 1, 0, 0, 0, 1};
+    std::memcpy(m.k, k, sizeof k);
+    dds_write(info_, &m);
+  }
+  // A 16UC1 image with both pixels = value on depth (true) or amplitude (false).
+  void Image(bool depth, std::int32_t stamp_s, std::uint16_t value) {
+    std::uint16_t px[2] = {value, value};
+    sensor_msgs_msg_dds__Image_ m{};
+    m.header.stamp.sec = stamp_s;
+    m.header.frame_id = frame_id_;
+    m.width = 2;
+    m.height = 1;
+    m.encoding = encoding_;
+    m.step = 4;
+    m.data = {4, 4, reinterpret_cast<std::uint8_t*>(px), false};
+    dds_write(depth ? depth_ : amplitude_, &m);
+  }
+  void Flush() {
+    for (dds_entity_t w : {depth_, amplitude_, info_}) dds_wait_for_acks(w, DDS_SECS(5));
+  }
+
+ private:
+  char frame_id_[4] = "cam";
+  char model_[10] = "plumb_bob";
+  char encoding_[6] = "16UC1";
+  dds_entity_t participant_ = 0, depth_ = 0, amplitude_ = 0, info_ = 0;
+};
+
+TEST(Ros2Camera, PairsImagesByStampAndCountsTheUnpaired) {
+  const int domain = ClaimDomain();
+  ASSERT_GE(domain, 0);
+  UseLoopbackOnly();
+  TinyDriver driver(domain, "/t15/tiny");
+  std::thread info_sender([&] {
+    ASSERT_TRUE(driver.WaitForReader());
+    driver.Info();
+    // Stamp 1: depth only (its amplitude is lost). Stamp 2: both, amplitude first. Stamp 3:
+    // both.
+    driver.Image(true, 1, 1000);
+    driver.Image(false, 2, 300);
+    driver.Image(true, 2, 2000);
+    driver.Image(true, 3, 3000);
+    driver.Image(false, 3, 400);
+    driver.Flush();
+  });
+  std::optional<Frame> f2, f3, end;
+  std::uint64_t skipped = 0;
+  std::string last_skip;
+  try {
+    ros2::Ros2Camera camera(ParseRos2CameraSpec("/t15/tiny?reliable=1&timeout_s=5", domain));
+    EXPECT_EQ(camera.Info().width(), 2);
+    f2 = camera.Grab();
+    f3 = camera.Grab();
+    skipped = camera.skipped();
+    last_skip = camera.last_skip();
+    info_sender.join();
+  } catch (...) {
+    info_sender.join();
+    throw;
+  }
+  ASSERT_TRUE(f2.has_value());
+  ASSERT_TRUE(f3.has_value());
+  // Registers = 8 x radial mm; the rays of pixels at u = 0, 1 with cx = 0.5, fx = 1 have
+  // z = 1 / sqrt(1.25).
+  EXPECT_EQ(f2->distance[0], static_cast<std::uint16_t>(std::lround(8 * 2000 * std::sqrt(1.25))));
+  EXPECT_EQ(f2->amplitude[0], 300);
+  EXPECT_EQ(f3->distance[1], static_cast<std::uint16_t>(std::lround(8 * 3000 * std::sqrt(1.25))));
+  EXPECT_EQ(f3->amplitude[1], 400);
+  EXPECT_EQ(f2->info.timestamp_ns, 0);
+  EXPECT_EQ(f3->info.timestamp_ns, 1'000'000'000);
+  EXPECT_EQ(f2->info.sequence, 0u);
+  EXPECT_EQ(f3->info.sequence, 1u);
+  EXPECT_EQ(skipped, 1u);
+  EXPECT_NE(last_skip.find("/t15/tiny/depth: image without a partner"), std::string::npos)
+      << last_skip;
 }
 
 struct RunOutput {
