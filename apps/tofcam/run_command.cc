@@ -212,6 +212,22 @@ void RunRun(const RunOptions& o) {
 
   CameraSourceOptions source = o.source;
   source.ros2_domain = o.ros2_domain;
+#ifdef TOFCAM_WITH_ROS2
+  if (o.ros2 && o.camera.rfind("ros2:", 0) == 0) {
+    // Subscribing to what this run publishes would feed its output back as its input.
+    const ros2::Ros2CameraOptions in = ros2::ParseRos2CameraSpec(o.camera.substr(5), o.ros2_domain);
+    const std::string out_prefix = (o.ros2_namespace == "/" ? "" : o.ros2_namespace) + "/";
+    for (const std::string& topic :
+         {in.depth_topic, in.amplitude_topic, in.intensity_topic, in.camera_info_topic}) {
+      const std::string resolved = topic.empty() ? "" : ros2::ResolveTopic(in.name_space, topic);
+      if (in.domain_id == o.ros2_domain && resolved.rfind(out_prefix, 0) == 0) {
+        throw Error(ErrorCode::kInvalidArgument,
+                    "--camera " + o.camera + " reads " + resolved + ", inside --ros2-namespace " +
+                        o.ros2_namespace + " that this run publishes: use another namespace");
+      }
+    }
+  }
+#endif
   std::unique_ptr<Camera> camera = OpenCamera(o.camera, source);
   LoadPipelineCalibration(options, camera->Info());
   // Camera-specific values the configuration left at their defaults come from measurements of

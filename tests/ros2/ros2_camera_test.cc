@@ -360,5 +360,19 @@ TEST(Ros2Camera, MissingPublisherIsAClearCliError) {
   fs::remove_all(dir);
 }
 
+TEST(Ros2Camera, RefusesToReadWhatTheSameRunPublishes) {
+  const fs::path dir = ScratchDir("feedback");
+  Child run = Spawn({TOFCAM_CLI, "run", "--camera", "ros2:/t15/same", "--frames", "1", "--out",
+                     (dir / "out").string(), "--ros2", "--ros2-namespace", "/t15/same"},
+                    (dir / "run.log").string());
+  const int status = Wait(run);
+  const std::string log = ReadText(dir / "run.log");
+  EXPECT_NE(status, 0) << log;
+  EXPECT_NE(status, -1) << "killed: it hung";
+  EXPECT_NE(log.find("reads /t15/same/depth, inside --ros2-namespace /t15/same"), std::string::npos)
+      << log;
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace tofcam::ros2_test
