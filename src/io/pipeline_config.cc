@@ -109,6 +109,12 @@ void VisitOptions(V& v, PipelineOptions& o) {
       v.Field("min_points", o.filters.weingarten.min_points, "[1, 1000000]");
     });
   });
+  v.Section("uncertainty", "ΔL plus edges in metres, one threshold (not in the paper)", [&] {
+    v.Field("enabled", o.uncertainty_enabled, "needs accuracy.enabled");
+    v.Field("max_uncertainty_m", o.uncertainty.max_uncertainty_m, "m, (0, 100]");
+    v.Field("edge_fraction", o.uncertainty.edge_fraction, "part of an edge's jump, [0, 1]");
+    v.Field("min_jump_sigma", o.uncertainty.min_jump_sigma, "steps below are noise, (0, 100]");
+  });
   v.Section("smoothing", "edge-preserving spatial smoothing of kept distances (not in the paper)",
             [&] {
               v.Field("enabled", o.smoothing_enabled, "");

@@ -33,6 +33,11 @@ void PipelineOptions::Validate() const {
     throw Error(ErrorCode::kInvalidArgument,
                 "filters.accuracy.enabled needs accuracy.enabled (the filter reads ΔL)");
   }
+  ValidateSection("uncertainty", [&] { uncertainty.Validate(); });
+  if (uncertainty_enabled && !accuracy_enabled) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "uncertainty.enabled needs accuracy.enabled (the uncertainty starts from ΔL)");
+  }
   ValidateSection("smoothing", [&] { smoothing.Validate(); });
   ValidateSection("temporal", [&] { temporal.Validate(); });
   ValidateSection("frame_pair", [&] {
@@ -131,7 +136,8 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   // Smoothing and the temporal filter change distances after the filters: the cloud follows.
   const bool confidence = filters.confidence_enabled && !frame.confidence.empty();
   const bool late_cloud = neighbourhood || confidence || options_.smoothing_enabled ||
-                          temporal_.has_value() || pair_.has_value();
+                          temporal_.has_value() || pair_.has_value() ||
+                          options_.uncertainty_enabled;
   MetricFrame& m = result.frame;
   pipeline_internal::FusedStages s;
   s.metric = options_.metric;
@@ -161,6 +167,11 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
     // as rejected (as in ApplyFilters); they OR into the filter flags.
     filters_internal::NeighbourhoodFiltersInto(m, rays_, filters, result.filter_flags);
     MergeFlags(m, result.filter_flags);
+  }
+  if (options_.uncertainty_enabled) {
+    const Image<PixelFlags> raised = UncertaintyFilter(m, options_.uncertainty);
+    MergeFlags(m, raised);
+    for (std::size_t i = 0; i < raised.size(); ++i) result.filter_flags[i] |= raised[i];
   }
   if (options_.smoothing_enabled) {
     SpatialFilterInto(m, options_.smoothing, smoothed_);

@@ -33,6 +33,7 @@
 #include "tofcam/filters/frame_pair.h"
 #include "tofcam/filters/spatial_filter.h"
 #include "tofcam/filters/temporal_filter.h"
+#include "tofcam/filters/uncertainty.h"
 #include "tofcam/optics/scattering.h"
 #include "tofcam/pipeline/frame_stats.h"
 #include "tofcam/pipeline/metric_conversion.h"
@@ -61,6 +62,11 @@ struct PipelineOptions {
   AccuracyOptions accuracy;
 
   FilterSetOptions filters;
+
+  /// The combined uncertainty (ΔL plus edges, tofcam/filters/uncertainty.h) with one threshold
+  /// in metres, after the other filters: kLowConfidence. Needs ΔL. Off by default.
+  bool uncertainty_enabled = false;
+  UncertaintyOptions uncertainty;
 
   /// Edge-preserving spatial smoothing of the kept pixels' distances after the filters (median
   /// or ΔL-weighted bilateral, tofcam/filters/spatial_filter.h). Off by default: the paper has

@@ -1,0 +1,39 @@
+#pragma once
+/// \file
+/// A combined per-pixel uncertainty in metres and one threshold on it (not in the paper; issue
+/// 18, docs/beyond.md). ΔL predicts only the noise of a pixel that sees one surface. A pixel on a
+/// depth edge mixes two surfaces and may read anywhere between them: its error is bounded by the
+/// jump, not by its noise. The uncertainty is
+///
+///   u = sqrt(ΔL² + (edge_fraction x jump)²)
+///
+/// with `jump` the largest distance step to a usable 4-neighbour when that step exceeds
+/// `min_jump_sigma` of the two pixels' combined ΔL (smaller steps are noise or slope, not an
+/// edge). Pixels with a reject flag (saturated, inconsistent between frequencies, ...) or
+/// without ΔL have u = +inf. One threshold, in metres, then decides.
+
+#include "tofcam/core/frame.h"
+
+namespace tofcam {
+
+struct UncertaintyOptions {
+  /// Pixels with u above this are flagged kLowConfidence, m, (0, 100].
+  double max_uncertainty_m = 0.05;
+  /// Part of an edge's jump counted as uncertainty, [0, 1]: a mixed pixel's reading lies
+  /// between the two surfaces, half the jump away from the nearer one at worst on average.
+  double edge_fraction = 0.5;
+  /// Steps smaller than this many combined σ are not edges, (0, 100].
+  double min_jump_sigma = 3.0;
+  void Validate() const;
+};
+
+/// u per pixel, m (see the file comment). Throws Error(kInvalidArgument) for bad options, an
+/// empty frame or one without ΔL.
+[[nodiscard]] Image<float> ComputeUncertainty(const MetricFrame& frame,
+                                              const UncertaintyOptions& options = {});
+
+/// kLowConfidence where u > max_uncertainty_m (only the flags it raises, as every filter).
+[[nodiscard]] Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame,
+                                                  const UncertaintyOptions& options = {});
+
+}  // namespace tofcam
