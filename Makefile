@@ -59,7 +59,7 @@ FUZZ_SECONDS ?= 30
 # unchecksummed format, and libhdf5 1.10 itself has heap overflows in its attribute parser on
 # damaged such files (found by this fuzzer; see docs/importers.md). Run it with
 # `make fuzz FUZZERS=fuzz_ifm_o3d3xx`.
-FUZZERS      ?= fuzz_recording fuzz_adi fuzz_azure_calibration fuzz_mesa_dat
+FUZZERS      ?= fuzz_recording fuzz_adi fuzz_azure_calibration fuzz_mesa_dat fuzz_ros2_images
 fuzz: deps
 	@CC=clang CXX=clang++ cmake -S . -B $(FUZZ_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DTOFCAM_BUILD_FUZZ=ON -DTOFCAM_BUILD_TESTS=OFF -DTOFCAM_BUILD_BENCH=OFF \
@@ -68,7 +68,7 @@ fuzz: deps
 	@rm -rf $(FUZZ_BUILD)/corpus && mkdir -p $(FUZZ_BUILD)/artifacts
 	@ASAN_OPTIONS=detect_leaks=1 $(FUZZ_BUILD)/fuzz/fuzz_seed_writer $(FUZZ_BUILD)/corpus .
 	@for f in $(FUZZERS); do \
-	  echo "== $$f ($(FUZZ_SECONDS) s)"; \
+	  echo "== $$f ($(FUZZ_SECONDS) s)"; mkdir -p $(FUZZ_BUILD)/corpus/$$f; \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/fuzz/lsan.supp ASAN_OPTIONS=allocator_may_return_null=1 \
 	  $(FUZZ_BUILD)/fuzz/$$f -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 -timeout=10 \
 	    -max_len=65536 -print_final_stats=1 -artifact_prefix=$(FUZZ_BUILD)/artifacts/$$f- \
