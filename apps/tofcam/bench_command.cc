@@ -392,7 +392,70 @@ struct Row {
   double bytes_per_pixel = 0;
   double memcpy_ns = 0;
   std::string note;
+  // Spread over the batches: ns per frame (min, max) and, with a floor, the stage / memcpy ratio
+  // of each pair of back-to-back batches (median, min, max).
+  double ns_min = 0, ns_max = 0;
+  double ratio = 0, ratio_min = 0, ratio_max = 0;
 };
+
+// A stage and its memcpy floor timed in alternating batches (stage, floor, stage, floor, ...),
+// so load that comes and goes hits both alike: per pair the ratio stage / floor. Medians of
+// kPairs pairs, with the minimum and maximum as the spread.
+struct Paired {
+  double stage_ns = 0, stage_min = 0, stage_max = 0, floor_ns = 0;
+  double ratio = 0, ratio_min = 0, ratio_max = 0;
+};
+constexpr int kPairs = 7;
+
+// Repetitions of fn that take about a fifth of min_time_s (after a warm-up).
+std::size_t CalibrateReps(std::vector<Workspace>& ws, int threads,
+                          const std::function<void(Workspace&, std::size_t)>& fn,
+                          double min_time_s) {
+  const double batch_ns = min_time_s * 1e9 / 5;
+  std::size_t reps = 1;
+  RunBatch(ws, threads, fn, 2);
+  for (;;) {
+    const double t = RunBatch(ws, threads, fn, reps);
+    if (t >= batch_ns || reps >= (std::size_t{1} << 30)) return reps;
+    reps = std::max(reps * 2, static_cast<std::size_t>(reps * batch_ns / std::max(t, 1.0)));
+  }
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+Paired TimeAgainstFloor(std::vector<Workspace>& ws, int threads,
+                        const std::function<void(Workspace&, std::size_t)>& fn,
+                        std::size_t floor_bytes, double min_time_s) {
+  const std::function<void(Workspace&, std::size_t)> copy = [](Workspace& w, std::size_t) {
+    std::memcpy(w.copy_dst.data(), w.copy_src.data(), w.copy_bytes);
+    Sink(w, w.copy_dst.data());
+  };
+  for (auto& w : ws) w.copy_bytes = floor_bytes;
+  const std::size_t reps = CalibrateReps(ws, threads, fn, min_time_s);
+  const std::size_t floor_reps = CalibrateReps(ws, threads, copy, min_time_s);
+  std::vector<double> stage, floor, ratio;
+  for (int b = 0; b < kPairs; ++b) {
+    const double ts = RunBatch(ws, threads, fn, reps) /
+                      static_cast<double>(reps * static_cast<std::size_t>(threads));
+    const double tf = RunBatch(ws, threads, copy, floor_reps) /
+                      static_cast<double>(floor_reps * static_cast<std::size_t>(threads));
+    stage.push_back(ts);
+    floor.push_back(tf);
+    ratio.push_back(ts / tf);
+  }
+  Paired p;
+  p.stage_ns = Median(stage);
+  p.stage_min = *std::min_element(stage.begin(), stage.end());
+  p.stage_max = *std::max_element(stage.begin(), stage.end());
+  p.floor_ns = Median(floor);
+  p.ratio = Median(ratio);
+  p.ratio_min = *std::min_element(ratio.begin(), ratio.end());
+  p.ratio_max = *std::max_element(ratio.begin(), ratio.end());
+  return p;
+}
 
 double MemcpyNs(std::vector<Workspace>& ws, int threads, std::size_t bytes, double min_time_s) {
   for (auto& w : ws) w.copy_bytes = bytes;
@@ -436,10 +499,13 @@ std::pair<double, double> TimeRecording(const Input& in, const std::filesystem::
 struct SimRow {
   std::string name;
   int threads = 1;
-  double frames_per_s = 0;
+  double frames_per_s = 0;  // median of 5 batches
+  double fps_min = 0, fps_max = 0;
 };
 
-double SimulatorFps(sim::Scene scene, const sim::CameraModel& model, int threads,
+// Frames/s of Grab(), median of 5 batches of at least min_time_s / 5 and 3 frames each, with the
+// slowest and fastest batch.
+SimRow SimulatorFps(std::string name, sim::Scene scene, const sim::CameraModel& model, int threads,
                     double min_time_s) {
   sim::SimulatorOptions so;
   so.seed = 7;
@@ -447,15 +513,25 @@ double SimulatorFps(sim::Scene scene, const sim::CameraModel& model, int threads
   so.integration_time_register = 40;
   sim::SimulatedCamera cam(std::move(scene), model, so);
   for (int i = 0; i < 2; ++i) (void)cam.Grab();
-  const auto t0 = Clock::now();
-  int n = 0;
-  double elapsed = 0;
-  do {
-    (void)cam.Grab();
-    ++n;
-    elapsed = std::chrono::duration<double>(Clock::now() - t0).count();
-  } while (elapsed < min_time_s || n < 5);
-  return n / elapsed;
+  std::vector<double> fps;
+  for (int b = 0; b < 5; ++b) {
+    const auto t0 = Clock::now();
+    int n = 0;
+    double elapsed = 0;
+    do {
+      (void)cam.Grab();
+      ++n;
+      elapsed = std::chrono::duration<double>(Clock::now() - t0).count();
+    } while (elapsed < min_time_s / 5 || n < 3);
+    fps.push_back(n / elapsed);
+  }
+  SimRow r;
+  r.name = std::move(name);
+  r.threads = threads;
+  r.frames_per_s = Median(fps);
+  r.fps_min = *std::min_element(fps.begin(), fps.end());
+  r.fps_max = *std::max_element(fps.begin(), fps.end());
+  return r;
 }
 
 // Bad = |measured - true| > 5 cm or no true surface (the frame_stats definition).
@@ -653,7 +729,6 @@ void RunBench(const BenchOptions& o) {
     std::vector<Workspace> ws(2);
     const auto copy_max = static_cast<std::size_t>(max_bpp / 2 * static_cast<double>(in.pixels()));
     for (auto& w : ws) InitWorkspace(w, in, copy_max);
-    std::map<std::pair<int, std::size_t>, double> floor_cache;
     for (const Stage& s : stages) {
       for (int t : thread_counts) {
         if (t > 1 && !s.threadable) continue;
@@ -662,16 +737,20 @@ void RunBench(const BenchOptions& o) {
         r.resolution = in.name;
         r.pixels = in.pixels();
         r.threads = t;
-        r.ns_per_frame = TimePerCall(ws, t, s.run, o.min_time_s) / s.frames_per_call;
         r.bytes_per_pixel = s.bytes_per_pixel;
         // A memcpy of N bytes reads N and writes N: N = traffic / 2 gives the same traffic.
         const auto bytes =
             static_cast<std::size_t>(s.bytes_per_pixel / 2 * static_cast<double>(in.pixels()));
-        auto it = floor_cache.find({t, bytes});
-        if (it == floor_cache.end()) {
-          it = floor_cache.emplace(std::pair{t, bytes}, MemcpyNs(ws, t, bytes, o.min_time_s)).first;
-        }
-        r.memcpy_ns = it->second;
+        const Paired p = TimeAgainstFloor(ws, t, s.run, bytes, o.min_time_s);
+        r.ns_per_frame = p.stage_ns / s.frames_per_call;
+        r.ns_min = p.stage_min / s.frames_per_call;
+        r.ns_max = p.stage_max / s.frames_per_call;
+        r.memcpy_ns = p.floor_ns;
+        // Per input frame on both sides: a call of a multi-frame stage moves frames_per_call
+        // frames' traffic.
+        r.ratio = p.ratio / s.frames_per_call;
+        r.ratio_min = p.ratio_min / s.frames_per_call;
+        r.ratio_max = p.ratio_max / s.frames_per_call;
         if (t > 1) r.note = "2 frames concurrently";
         rows.push_back(r);
       }
@@ -700,14 +779,14 @@ void RunBench(const BenchOptions& o) {
     const double t = std::max(o.min_time_s * 4, 1.0);
     for (int th : thread_counts) {
       sim_rows.push_back(
-          {"SR-2 pavilion, moving camera, 2x2 supersampling, all effects", th,
-           SimulatorFps(bench::MovingPavilion(), sim::ResolveCameraModel("sr2"), th, t)});
-      sim_rows.push_back(
-          {"SR-2 pavilion, static camera", th,
-           SimulatorFps(sim::LoadBuiltinScene("pavilion"), sim::ResolveCameraModel("sr2"), th, t)});
-      sim_rows.push_back({"generic 640x480 model, pavilion, moving camera", th,
-                          SimulatorFps(bench::MovingPavilion(),
-                                       sim::ResolveCameraModel("generic640x480"), th, t)});
+          SimulatorFps("SR-2 pavilion, moving camera, 2x2 supersampling, all effects",
+                       bench::MovingPavilion(), sim::ResolveCameraModel("sr2"), th, t));
+      sim_rows.push_back(SimulatorFps("SR-2 pavilion, static camera",
+                                      sim::LoadBuiltinScene("pavilion"),
+                                      sim::ResolveCameraModel("sr2"), th, t));
+      sim_rows.push_back(SimulatorFps("generic 640x480 model, pavilion, moving camera",
+                                      bench::MovingPavilion(),
+                                      sim::ResolveCameraModel("generic640x480"), th, t));
     }
   }
 
@@ -748,9 +827,13 @@ void RunBench(const BenchOptions& o) {
                 {"ns_per_pixel", r.ns_per_frame / static_cast<double>(r.pixels)},
                 {"frames_per_s", 1e9 / r.ns_per_frame}};
       if (r.bytes_per_pixel > 0) {
+        j["us_per_frame_min"] = r.ns_min * 1e-3;
+        j["us_per_frame_max"] = r.ns_max * 1e-3;
         j["traffic_bytes_per_pixel"] = r.bytes_per_pixel;
         j["memcpy_us"] = r.memcpy_ns * 1e-3;
-        j["ratio_to_memcpy"] = r.ns_per_frame / r.memcpy_ns;
+        j["ratio_to_memcpy"] = r.ratio;  // median of the paired batches
+        j["ratio_min"] = r.ratio_min;
+        j["ratio_max"] = r.ratio_max;
       }
       if (!r.note.empty()) j["note"] = r.note;
       jr.push_back(j);
@@ -758,7 +841,11 @@ void RunBench(const BenchOptions& o) {
     report["stages"] = jr;
     json js = json::array();
     for (const SimRow& s : sim_rows) {
-      js.push_back({{"scene", s.name}, {"threads", s.threads}, {"frames_per_s", s.frames_per_s}});
+      js.push_back({{"scene", s.name},
+                    {"threads", s.threads},
+                    {"frames_per_s", s.frames_per_s},
+                    {"frames_per_s_min", s.fps_min},
+                    {"frames_per_s_max", s.fps_max}});
     }
     report["simulator"] = js;
     std::printf("%s\n", report.dump(2).c_str());
@@ -775,14 +862,15 @@ void RunBench(const BenchOptions& o) {
   for (const Row& r : rows) {
     if (r.resolution != last) {
       last = r.resolution;
-      std::printf("\n== %s (%lld px)\n%-40s %3s %11s %8s %10s %11s %7s\n", r.resolution.c_str(),
-                  static_cast<long long>(r.pixels), "stage", "thr", "us/frame", "ns/px", "frames/s",
-                  "memcpy us", "ratio");
+      std::printf("\n== %s (%lld px)\n%-40s %3s %11s %8s %10s %11s %7s %13s\n",
+                  r.resolution.c_str(), static_cast<long long>(r.pixels), "stage", "thr",
+                  "us/frame", "ns/px", "frames/s", "memcpy us", "ratio", "ratio min-max");
     }
     std::printf("%-40s %3d %11.1f %8.2f %10.0f", r.stage.c_str(), r.threads, r.ns_per_frame * 1e-3,
                 r.ns_per_frame / static_cast<double>(r.pixels), 1e9 / r.ns_per_frame);
     if (r.bytes_per_pixel > 0) {
-      std::printf(" %11.1f %7.1f\n", r.memcpy_ns * 1e-3, r.ns_per_frame / r.memcpy_ns);
+      std::printf(" %11.1f %7.2f %6.2f-%-6.2f\n", r.memcpy_ns * 1e-3, r.ratio, r.ratio_min,
+                  r.ratio_max);
     } else {
       std::printf(" %11s %7s\n", "-", "-");
     }
@@ -790,12 +878,16 @@ void RunBench(const BenchOptions& o) {
   std::printf(
       "\n2-thread rows: two frames processed concurrently (no stage has a threaded path);\n"
       "time is wall time per frame. memcpy: a copy with the stage's minimal memory "
-      "traffic.\n");
+      "traffic;\nratio: median over %d pairs of back-to-back batches (stage, memcpy) of "
+      "stage / memcpy.\n",
+      kPairs);
   if (!sim_rows.empty()) {
-    std::printf("\n== simulator (SimulatedCamera::Grab)\n%-60s %3s %10s\n", "scene", "thr",
-                "frames/s");
+    std::printf(
+        "\n== simulator (SimulatedCamera::Grab), median of 5 batches\n%-60s %3s %10s %15s\n",
+        "scene", "thr", "frames/s", "min-max");
     for (const SimRow& s : sim_rows) {
-      std::printf("%-60s %3d %10.1f\n", s.name.c_str(), s.threads, s.frames_per_s);
+      std::printf("%-60s %3d %10.1f %7.1f-%-7.1f\n", s.name.c_str(), s.threads, s.frames_per_s,
+                  s.fps_min, s.fps_max);
     }
   }
 }

@@ -1,10 +1,16 @@
 #include "tofcam/pan/pan_view.h"
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
+#include <vector>
 
+#include "../filters/hot_loop.h"
 #include "tofcam/core/error.h"
+#include "tofcam/core/pixel_flags.h"
 #include "tofcam/core/units.h"
 
 namespace tofcam {
@@ -13,18 +19,115 @@ namespace {
 constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 constexpr double kDeg = kPi / 180.0;
 
-void Append(const PointCloud& src, bool only_valid, PointCloud& dst) {
-  for (std::size_t i = 0; i < src.size(); ++i) {
-    if (only_valid && !src.IsValid(i)) continue;
-    dst.x.push_back(src.x[i]);
-    dst.y.push_back(src.y[i]);
-    dst.z.push_back(src.z[i]);
-    dst.amplitude.push_back(src.amplitude[i]);
-    dst.intensity.push_back(src.intensity[i]);
-    dst.delta_l_m.push_back(src.delta_l_m[i]);
-    dst.flags.push_back(src.flags[i]);
+// a where c, else b, by bit masks: GCC turns a ternary into a branch here and keeps the loop
+// scalar (the branches on the octant are unpredictable).
+inline double Sel(bool c, double a, double b) {
+  const std::uint64_t m = 0 - static_cast<std::uint64_t>(c);
+  return std::bit_cast<double>((std::bit_cast<std::uint64_t>(a) & m) |
+                               (std::bit_cast<std::uint64_t>(b) & ~m));
+}
+
+// atan2(y, x) in [-pi, pi] without libm, branch-free so the per-point loop vectorises: octant
+// reduction to atan(u), |u| <= tan(pi/8), by its Taylor series to u^21 (error below
+// u^23/23 < 1e-10 rad, a millionth of the smallest panorama cell). atan2(0, 0) = 0.
+inline double FastAtan2(double y, double x) {
+  constexpr double kTanPi8 = 0.41421356237309504880;
+  const double ax = std::abs(x), ay = std::abs(y);
+  const double hi = std::max(ax, ay), lo = std::min(ax, ay);
+  const double t = lo / std::max(hi, 1e-300);
+  const bool reduce = t > kTanPi8;
+  const double u = Sel(reduce, (t - 1.0) / (t + 1.0), t);
+  const double u2 = u * u;
+  double p = 1.0 / 21;
+  p = p * u2 - 1.0 / 19;
+  p = p * u2 + 1.0 / 17;
+  p = p * u2 - 1.0 / 15;
+  p = p * u2 + 1.0 / 13;
+  p = p * u2 - 1.0 / 11;
+  p = p * u2 + 1.0 / 9;
+  p = p * u2 - 1.0 / 7;
+  p = p * u2 + 1.0 / 5;
+  p = p * u2 - 1.0 / 3;
+  p = p * u2 + 1.0;
+  double a = Sel(reduce, kPi / 4, 0.0) + u * p;
+  a = Sel(ay > ax, kPi / 2 - a, a);
+  a = Sel(x < 0.0, kPi - a, a);
+  return Sel(y < 0.0, -a, a);
+}
+
+// Geometry of the panorama for the per-point loop.
+struct Strip {
+  double forward[3], left[3], up[3];
+  double max_azimuth_rad, max_tan_elevation, inv_resolution;
+  int cols, rows;
+};
+
+// Moves n camera-frame points into the base frame (r * p + t, NaN stays NaN) and marks the valid
+// ones (no reject flag, finite coordinates), as TransformPointCloud and PointCloud::IsValid do.
+[[gnu::noinline]] TOFCAM_HOT_LOOP void TransformPoints(
+    std::size_t n, const float* __restrict r, const float* __restrict t, const float* __restrict x,
+    const float* __restrict y, const float* __restrict z, const std::uint16_t* __restrict flags,
+    float* __restrict bx, float* __restrict by, float* __restrict bz,
+    std::uint8_t* __restrict valid) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const float px = r[0] * x[i] + r[3] * y[i] + r[6] * z[i] + t[0];
+    const float py = r[1] * x[i] + r[4] * y[i] + r[7] * z[i] + t[1];
+    const float pz = r[2] * x[i] + r[5] * y[i] + r[8] * z[i] + t[2];
+    bx[i] = px;
+    by[i] = py;
+    bz[i] = pz;
+    // Finite: |v| <= max (false for inf and NaN).
+    const bool finite = (std::abs(px) <= std::numeric_limits<float>::max()) &
+                        (std::abs(py) <= std::numeric_limits<float>::max()) &
+                        (std::abs(pz) <= std::numeric_limits<float>::max());
+    valid[i] = static_cast<std::uint8_t>(((flags[i] & kRejectMask) == 0) & finite);
   }
 }
+
+// Per base-frame point: its panorama cell (row * cols + col) or -1 when it is invalid, on the
+// axis or outside the strip, and its distance from the rotation centre.
+[[gnu::noinline]] TOFCAM_HOT_LOOP void CellsOfPoints(
+    std::size_t n, const Strip& s, const float* __restrict bx, const float* __restrict by,
+    const float* __restrict bz, const std::uint8_t* __restrict valid, std::int32_t* __restrict cell,
+    float* __restrict range) {
+  const double f0 = s.forward[0], f1 = s.forward[1], f2 = s.forward[2];
+  const double l0 = s.left[0], l1 = s.left[1], l2 = s.left[2];
+  const double u0 = s.up[0], u1 = s.up[1], u2 = s.up[2];
+  const double cols = s.cols, rows = s.rows;
+  const double max_az = s.max_azimuth_rad, max_tan = s.max_tan_elevation;
+  const double inv_res = s.inv_resolution;
+  const std::int32_t stride = s.cols;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double px = bx[i], py = by[i], pz = bz[i];
+    const double pf = px * f0 + py * f1 + pz * f2;
+    const double pl = px * l0 + py * l1 + pz * l2;
+    const double pu = px * u0 + py * u1 + pz * u2;
+    const double rho = std::sqrt(pf * pf + pl * pl);
+    const bool off_axis = rho >= 1e-6;  // on the axis: no azimuth
+    const double az = FastAtan2(pl, pf);
+    const double col = (max_az - az) * inv_res;
+    const double row = (max_tan - pu / std::max(rho, 1e-6)) * inv_res;
+    const bool in =
+        (valid[i] != 0) & off_axis & (col >= 0.0) & (col < cols) & (row >= 0.0) & (row < rows);
+    const auto c = static_cast<std::int32_t>(Sel(in, col, 0.0));
+    const auto r = static_cast<std::int32_t>(Sel(in, row, 0.0));
+    cell[i] = (r * stride + c + 1) * static_cast<std::int32_t>(in) - 1;  // -1 when out
+    range[i] = static_cast<float>(std::sqrt(px * px + py * py + pz * pz));
+  }
+}
+
+// Reused per-frame buffers of MakePanView.
+struct Scratch {
+  PointCloud camera;
+  std::vector<float> bx, by, bz, range;
+  std::vector<std::uint8_t> valid;
+  std::vector<std::int32_t> cell;
+  void Resize(std::size_t n) {
+    for (auto* v : {&bx, &by, &bz, &range}) v->resize(n);
+    valid.resize(n);
+    cell.resize(n);
+  }
+};
 
 }  // namespace
 
@@ -95,41 +198,92 @@ PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
   const Eigen::Vector3d z(0.0, 0.0, 1.0);
   const Eigen::Vector3d forward = (z - z.dot(up) * up).normalized();
   const Eigen::Vector3d left = up.cross(forward);
+  Strip strip{};
+  for (int i = 0; i < 3; ++i) {
+    strip.forward[i] = forward[i];
+    strip.left[i] = left[i];
+    strip.up[i] = up[i];
+  }
+  strip.max_azimuth_rad = view.max_azimuth_rad;
+  strip.max_tan_elevation = view.max_tan_elevation;
+  strip.inv_resolution = 1.0 / view.resolution_rad;
+  strip.cols = cols;
+  strip.rows = rows;
   view.cloud.height = 1;
   view.frame_offsets.push_back(0);
 
+  // The merged cloud is written in place (at most every point of every frame), then trimmed.
+  std::size_t capacity = 0;
+  for (const MetricFrame& frame : frames) capacity += frame.radial_distance_m.size();
+  PointCloud& out = view.cloud;
+  for (auto* v : {&out.x, &out.y, &out.z, &out.amplitude, &out.intensity, &out.delta_l_m}) {
+    v->resize(capacity);
+  }
+  out.flags.resize(capacity);
+  std::size_t n_out = 0;
+  Scratch sc;
+  float* zb = zbuffer.data();
+  float* pano_d = view.panorama_distance_m.data();
+  float* pano_a = view.panorama_amplitude.data();
+
   for (std::size_t k = 0; k < frames.size(); ++k) {
     const MetricFrame& frame = frames[k];
-    const PointCloud camera_cloud = MakePointCloud(frame, rays, o.cloud);
+    MakePointCloudInto(frame, rays, sc.camera, o.cloud);
     const Eigen::Isometry3d pose = o.pan_unit.CameraToBase(frame.info.pan_angle_rad);
     if (!std::isfinite(frame.info.pan_angle_rad)) {
       throw Error(ErrorCode::kInvalidArgument,
                   "pan view: frame " + std::to_string(k) + " has a non-finite pan angle");
     }
     view.camera_to_base.push_back(pose);
-    const PointCloud base_cloud = TransformPointCloud(camera_cloud, pose);
-    Append(base_cloud, o.only_valid, view.cloud);
-    view.frame_offsets.push_back(view.cloud.x.size());
+    const Eigen::Matrix3f rot = pose.linear().cast<float>();  // column-major
+    const Eigen::Vector3f tr = pose.translation().cast<float>();
+    const PointCloud& cam = sc.camera;
+    const std::size_t n = cam.size();
+    sc.Resize(n);
+    static_assert(sizeof(PixelFlags) == sizeof(std::uint16_t));
+    TransformPoints(n, rot.data(), tr.data(), cam.x.data(), cam.y.data(), cam.z.data(),
+                    reinterpret_cast<const std::uint16_t*>(cam.flags.data()), sc.bx.data(),
+                    sc.by.data(), sc.bz.data(), sc.valid.data());
+    // Append (the valid points, or all) in input order, branch-free: every point is written at
+    // the end and the end advances only past the kept ones (the capacity has room for all).
+    const std::uint8_t keep_all = o.only_valid ? 0 : 1;
+    float* ox = out.x.data();
+    float* oy = out.y.data();
+    float* oz = out.z.data();
+    float* oa = out.amplitude.data();
+    float* oi = out.intensity.data();
+    float* od = out.delta_l_m.data();
+    PixelFlags* of = out.flags.data();
+    for (std::size_t i = 0; i < n; ++i) {
+      ox[n_out] = sc.bx[i];
+      oy[n_out] = sc.by[i];
+      oz[n_out] = sc.bz[i];
+      oa[n_out] = cam.amplitude[i];
+      oi[n_out] = cam.intensity[i];
+      od[n_out] = cam.delta_l_m[i];
+      of[n_out] = cam.flags[i];
+      n_out += static_cast<std::size_t>(sc.valid[i] | keep_all);
+    }
+    view.frame_offsets.push_back(n_out);
 
+    // Splat: the point nearest to the rotation centre wins its cell (the first of equals).
+    CellsOfPoints(n, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
+                  sc.cell.data(), sc.range.data());
     const float* d = frame.radial_distance_m.data();
-    for (std::size_t i = 0; i < base_cloud.size(); ++i) {
-      if (!base_cloud.IsValid(i)) continue;
-      const Eigen::Vector3d p(base_cloud.x[i], base_cloud.y[i], base_cloud.z[i]);
-      const double pf = p.dot(forward), pl = p.dot(left), pu = p.dot(up);
-      const double rho = std::hypot(pf, pl);
-      if (rho < 1e-6) continue;  // on the axis: no azimuth
-      const double col = (view.max_azimuth_rad - std::atan2(pl, pf)) / view.resolution_rad;
-      const double row = (view.max_tan_elevation - pu / rho) / view.resolution_rad;
-      if (!(col >= 0.0 && col < cols && row >= 0.0 && row < rows)) continue;
-      const int c = static_cast<int>(col), r = static_cast<int>(row);
-      const float range = static_cast<float>(p.norm());
-      if (range < zbuffer(r, c)) {
-        zbuffer(r, c) = range;
-        view.panorama_distance_m(r, c) = d[i];
-        view.panorama_amplitude(r, c) = base_cloud.amplitude[i];
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::int32_t c = sc.cell[i];
+      if (c < 0) continue;
+      if (sc.range[i] < zb[c]) {
+        zb[c] = sc.range[i];
+        pano_d[c] = d[i];
+        pano_a[c] = cam.amplitude[i];
       }
     }
   }
+  for (auto* v : {&out.x, &out.y, &out.z, &out.amplitude, &out.intensity, &out.delta_l_m}) {
+    v->resize(n_out);
+  }
+  out.flags.resize(n_out);
   view.cloud.width = static_cast<int>(view.cloud.x.size());
   if (view.cloud.width == 0) view.cloud.height = 0;
 

@@ -3,9 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "tofcam/core/error.h"
+#include "tofcam/core/pixel_flags.h"
 #include "tofcam/core/units.h"
 
 namespace tofcam {
@@ -125,6 +128,95 @@ TEST(PanViewTest, SyntheticRoomPanoramaColumnsMapToAzimuths) {
   }
   EXPECT_GT(checked, 250);
   EXPECT_GE(filled, covered * 95 / 100);  // at most a few holes in the covered part
+}
+
+// The view as MakePanView computed it before its speed work (issue 19): whole-cloud transform,
+// libm atan2 and hypot per point. The fast version must give the same cloud bit for bit and the
+// same panorama cells (its atan2 polynomial is within 1e-10 rad, so a point would have to lie
+// within that of a cell border to land elsewhere).
+struct Reference {
+  PointCloud cloud;
+  Image<float> distance, amplitude;
+};
+Reference ReferenceView(const std::vector<MetricFrame>& frames, const RayTable& rays,
+                        const PanViewOptions& o, int cols, int rows) {
+  Reference ref;
+  ref.distance = Image<float>(cols, rows, std::nanf(""));
+  ref.amplitude = Image<float>(cols, rows, std::nanf(""));
+  Image<float> zbuffer(cols, rows, std::numeric_limits<float>::infinity());
+  const double res = o.resolution_deg * kDeg, max_az = o.max_azimuth_deg * kDeg;
+  const double max_tan = std::tan(o.max_elevation_deg * kDeg);
+  const Eigen::Vector3d up = o.pan_unit.axis.normalized(), z(0, 0, 1);
+  const Eigen::Vector3d forward = (z - z.dot(up) * up).normalized(), left = up.cross(forward);
+  for (const MetricFrame& frame : frames) {
+    const PointCloud base = TransformPointCloud(MakePointCloud(frame, rays, o.cloud),
+                                                o.pan_unit.CameraToBase(frame.info.pan_angle_rad));
+    for (std::size_t i = 0; i < base.size(); ++i) {
+      if (!base.IsValid(i)) continue;
+      ref.cloud.x.push_back(base.x[i]);
+      ref.cloud.y.push_back(base.y[i]);
+      ref.cloud.z.push_back(base.z[i]);
+      const Eigen::Vector3d p(base.x[i], base.y[i], base.z[i]);
+      const double pf = p.dot(forward), pl = p.dot(left), pu = p.dot(up);
+      const double rho = std::hypot(pf, pl);
+      if (rho < 1e-6) continue;
+      const double col = (max_az - std::atan2(pl, pf)) / res;
+      const double row = (max_tan - pu / rho) / res;
+      if (!(col >= 0.0 && col < cols && row >= 0.0 && row < rows)) continue;
+      const int c = static_cast<int>(col), r = static_cast<int>(row);
+      const float range = static_cast<float>(p.norm());
+      if (range < zbuffer(r, c)) {
+        zbuffer(r, c) = range;
+        ref.distance(r, c) = frame.radial_distance_m.data()[i];
+        ref.amplitude(r, c) = base.amplitude[i];
+      }
+    }
+  }
+  return ref;
+}
+
+TEST(PanViewTest, SameViewAsTheStraightforwardAssembly) {
+  const CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
+  const RayTable rays = MakeRayTable(k);
+  std::vector<MetricFrame> frames;
+  std::uint32_t h = 12345;
+  auto next = [&h] {  // a small LCG: reproducible distances and flags
+    h = h * 1664525u + 1013904223u;
+    return static_cast<double>(h >> 8) / 16777216.0;
+  };
+  for (double deg : {-60.0, -30.0, 0.0, 30.0, 60.0}) {
+    MetricFrame f;
+    f.radial_distance_m = Image<float>(k.width, k.height);
+    f.amplitude = Image<float>(k.width, k.height);
+    f.flags = Image<PixelFlags>(k.width, k.height);
+    for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+      f.radial_distance_m.data()[i] = static_cast<float>(0.3 + 6.0 * next());
+      f.amplitude.data()[i] = static_cast<float>(100 + 1000 * next());
+      if (next() < 0.1) f.flags.data()[i].Set(Flag::kLowAmplitude);
+    }
+    f.info.pan_angle_rad = deg * kDeg;
+    frames.push_back(std::move(f));
+  }
+  PanViewOptions o;
+  const PanView view = MakePanView(frames, rays, o);
+  const Reference ref = ReferenceView(frames, rays, o, view.panorama_distance_m.width(),
+                                      view.panorama_distance_m.height());
+  ASSERT_EQ(view.cloud.size(), ref.cloud.size());
+  EXPECT_EQ(view.cloud.x, ref.cloud.x);
+  EXPECT_EQ(view.cloud.y, ref.cloud.y);
+  EXPECT_EQ(view.cloud.z, ref.cloud.z);
+  int filled = 0;
+  for (std::size_t i = 0; i < ref.distance.size(); ++i) {
+    const float a = view.panorama_distance_m.data()[i], b = ref.distance.data()[i];
+    if (std::isnan(b)) {
+      EXPECT_TRUE(std::isnan(a)) << i;
+      continue;
+    }
+    ++filled;
+    EXPECT_EQ(a, b) << i;
+    EXPECT_EQ(view.panorama_amplitude.data()[i], ref.amplitude.data()[i]) << i;
+  }
+  EXPECT_GT(filled, 10000);
 }
 
 TEST(PanViewTest, ErrorsAreReported) {
