@@ -4,6 +4,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "tofcam/core/error.h"
@@ -14,22 +16,34 @@
 namespace tofcam {
 namespace {
 
-TEST(FramePairSim, TwoFrequenciesReadAWallBeyondTheRange) {
+// The simulated SR-2 at register 60 on `scene`, with a second frequency (17 MHz) when `dual`.
+std::unique_ptr<sim::SimulatedCamera> Camera(const std::string& scene, bool dual,
+                                             std::uint64_t seed) {
   sim::CameraModel model = sim::ResolveCameraModel("sr2");
-  model.modulation_frequencies_hz = {20e6, 17e6};
+  if (dual) model.modulation_frequencies_hz = {20e6, 17e6};
   sim::SimulatorOptions so;
-  so.seed = 4;
-  sim::SimulatedCamera camera(sim::LoadBuiltinScene("beyond-range"), model, so);
-  camera.SetIntegrationTimeRegister(60);
+  so.seed = seed;
+  auto camera = std::make_unique<sim::SimulatedCamera>(sim::LoadBuiltinScene(scene), model, so);
+  camera->SetIntegrationTimeRegister(60);
+  return camera;
+}
+
+// No controller, no accuracy threshold: the tests judge unwrapping and wrap detection alone.
+PipelineOptions Unfiltered() {
   PipelineOptions po;
   po.controller_enabled = false;
-  po.filters.accuracy_enabled = false;  // judge the unwrapping, not the threshold
-  Pipeline pipeline(po, camera.Info());
+  po.filters.accuracy_enabled = false;
+  return po;
+}
+
+TEST(FramePairSim, TwoFrequenciesReadAWallBeyondTheRange) {
+  const auto camera = Camera("beyond-range", true, 4);
+  Pipeline pipeline(Unfiltered(), camera->Info());
   FramePairCombiner combiner;
   int right = 0, wrong = 0, inconsistent = 0, single_right = 0, single_total = 0;
   for (int k = 0; k < 6; ++k) {
-    camera.SetModulationFrequencyHz(k % 2 == 0 ? 20e6 : 17e6);
-    PipelineResult r = pipeline.Process(*camera.Grab());
+    camera->SetModulationFrequencyHz(k % 2 == 0 ? 20e6 : 17e6);
+    PipelineResult r = pipeline.Process(*camera->Grab());
     MetricFrame& m = r.frame;
     for (std::size_t i = 0; i < m.flags.size(); ++i) {
       if (m.flags[i].Any(kRejectMask)) continue;
@@ -60,25 +74,18 @@ TEST(FramePairSim, TwoFrequenciesReadAWallBeyondTheRange) {
 
 TEST(FramePairSim, PipelineAlternatesFrequenciesAndUnwraps) {
   // The pipeline's own loop: it asks for 17 MHz after a 20 MHz frame and back, and combines.
-  sim::CameraModel model = sim::ResolveCameraModel("sr2");
-  model.modulation_frequencies_hz = {20e6, 17e6};
-  sim::SimulatorOptions so;
-  so.seed = 6;
-  sim::SimulatedCamera camera(sim::LoadBuiltinScene("beyond-range"), model, so);
-  camera.SetIntegrationTimeRegister(60);
-  PipelineOptions po;
-  po.controller_enabled = false;
-  po.filters.accuracy_enabled = false;
+  const auto camera = Camera("beyond-range", true, 6);
+  PipelineOptions po = Unfiltered();
   po.frame_pair_enabled = true;
   po.alternate_modulation_frequency_hz = 17e6;
-  Pipeline pipeline(po, camera.Info());
+  Pipeline pipeline(po, camera->Info());
   PipelineResult r;
   std::vector<double> frequencies;
   int right = 0, total = 0;
   for (int k = 0; k < 5; ++k) {
-    pipeline.Process(*camera.Grab(), r);
+    pipeline.Process(*camera->Grab(), r);
     frequencies.push_back(r.frame.info.modulation_frequency_hz);
-    camera.SetModulationFrequencyHz(r.next_modulation_frequency_hz);
+    camera->SetModulationFrequencyHz(r.next_modulation_frequency_hz);
     EXPECT_EQ(r.combined, k > 0);
     if (!r.combined) continue;
     for (std::size_t i = 0; i < r.frame.flags.size(); ++i) {
@@ -96,7 +103,7 @@ TEST(FramePairSim, PipelineAlternatesFrequenciesAndUnwraps) {
   EXPECT_EQ(frequencies, (std::vector<double>{20e6, 17e6, 20e6, 17e6, 20e6}));
   EXPECT_GT(right, 0.99 * total);
   po.accuracy_enabled = false;
-  EXPECT_THROW(Pipeline(po, camera.Info()), Error);
+  EXPECT_THROW(Pipeline(po, camera->Info()), Error);
 }
 
 TEST(FramePairSim, WrapCheckOnOneFrequency) {
@@ -105,15 +112,9 @@ TEST(FramePairSim, WrapCheckOnOneFrequency) {
   // a scene of nothing but one wrapped wall is its own brightest surface, so the check (relative
   // to the frame's envelope) cannot see it: asserted as a known blind spot.
   for (const std::string scene : {"corridor", "beyond-range", "wall"}) {
-    sim::SimulatorOptions so;
-    so.seed = 5;
-    sim::SimulatedCamera camera(sim::LoadBuiltinScene(scene), sim::ResolveCameraModel("sr2"), so);
-    camera.SetIntegrationTimeRegister(60);
-    PipelineOptions po;
-    po.controller_enabled = false;
-    po.filters.accuracy_enabled = false;
-    Pipeline pipeline(po, camera.Info());
-    const PipelineResult r = pipeline.Process(*camera.Grab());
+    const auto camera = Camera(scene, false, 5);
+    Pipeline pipeline(Unfiltered(), camera->Info());
+    const PipelineResult r = pipeline.Process(*camera->Grab());
     const Image<PixelFlags> f = WrapCheckFilter(r.frame, pipeline.rays());
     int wrapped = 0, caught = 0, others = 0, alarms = 0;
     for (std::size_t i = 0; i < f.size(); ++i) {
