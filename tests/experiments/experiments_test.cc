@@ -296,6 +296,18 @@ TEST(ExperimentsTest, ControllersDefaultHoldsTheSetPointTheOldDefaultsDidNot) {
                                   "may-proportional (sweep set point)", "vendor-histogram"}) {
     EXPECT_GT(m(model, "mean_valid"), m(other, "mean_valid")) << other;
   }
+  // The same targets on the demo sequence (hand enters) and the static hand scene, against the
+  // printed law and the vendor's histogram (measured at full effort: demo 5 of 301 frames, run
+  // 3; hand 1 of 60).
+  for (const std::string scene : {"demo", "hand"}) {
+    const auto n = [&](const std::string& label, const std::string& key) {
+      return r.metrics.at(scene + "." + label + "." + key);
+    };
+    EXPECT_LE(n(model, "frames_over_1pct_saturated"), 0.05 * n(model, "frames")) << scene;
+    for (const std::string other : {"may-proportional (scheduled V_p)", "vendor-histogram"}) {
+      EXPECT_GT(n(model, "mean_valid"), n(other, "mean_valid")) << scene << " " << other;
+    }
+  }
   // Every controller stays within the 30-frames/s registers.
   for (const auto& [key, value] : r.metrics) {
     if (key.size() > 13 && key.substr(key.size() - 13) == ".register_max") {
