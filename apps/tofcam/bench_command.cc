@@ -36,9 +36,12 @@
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 #include "tofcam/filters/filter_set.h"
+#include "tofcam/filters/frame_pair.h"
 #include "tofcam/filters/spatial_filter.h"
 #include "tofcam/filters/temporal_filter.h"
+#include "tofcam/filters/uncertainty.h"
 #include "tofcam/io/recording.h"
+#include "tofcam/optics/scattering.h"
 #include "tofcam/pan/pan_view.h"
 #include "tofcam/pipeline/metric_conversion.h"
 #include "tofcam/pipeline/paper_chain.h"
@@ -143,6 +146,10 @@ struct Workspace {
   std::optional<PaperChain> paper_chain;
   std::optional<PaperChain> paper_chain_eq1;  // the paper's calibration alone (no table)
   std::unique_ptr<IntegrationTimeController> controller;
+  std::unique_ptr<IntegrationTimeController> model_controller;
+  Frame scatter_out;                 // CompensateScatteringInto output
+  std::vector<MetricFrame> pair_17;  // the ready frames as if taken at 17 MHz
+  MetricFrame pair_work;             // CombineFramePair works in place on a copy
   std::optional<Pipeline> pipeline_default;
   std::optional<Pipeline> pipeline_all_filters;
   PipelineResult result;
@@ -187,6 +194,14 @@ void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
   paper_law.kind = ControllerKind::kMayProportional;
   paper_law.gain_register_per_intensity = 2.5e-4;
   ws.controller = MakeController(paper_law);
+  ControllerOptions model_based;
+  model_based.kind = ControllerKind::kModelBased;
+  ws.model_controller = MakeController(model_based);
+  for (const MetricFrame& f : in.ready) {
+    ws.pair_17.push_back(f);
+    ws.pair_17.back().info.modulation_frequency_hz = 17e6;
+  }
+  ws.pair_work = in.ready.front();
   ws.temporal_frame = in.ready.front();
   ws.temporal.emplace();
   PaperChainOptions pc;
@@ -296,6 +311,57 @@ std::vector<Stage> MakeStages() {
   s.push_back({"controller (May P)", 4 + 2, 1, true, [](Workspace& ws, std::size_t i) {
                  ws.sink += static_cast<std::uint64_t>(
                      ws.controller->Update(ws.ready[i % ws.ready.size()]));
+               }});
+  // Not in the paper (issue 18, docs/beyond.md).
+  s.push_back({"controller (model-based)", 4 + 4 + 2, 1, true, [](Workspace& ws, std::size_t i) {
+                 ws.sink += static_cast<std::uint64_t>(
+                     ws.model_controller->Update(ws.ready[i % ws.ready.size()]));
+               }});
+  {
+    // A fitted noise model with every channel but confidence: in d, A, I, out ΔL.
+    AccuracyOptions fitted;
+    NoiseModel model;
+    model.intercept = -2.0;
+    model.log_amplitude = -0.8;
+    model.log_intensity = 0.4;
+    model.log_distance = 0.1;
+    model.amplitude_fraction = 0.3;
+    model.amplitude_ref = 20000.0;
+    fitted.model = model;
+    s.push_back({"delta L (fitted noise model)", 4 + 4 + 4 + 4, 1, true,
+                 [fitted](Workspace& ws, std::size_t i) {
+                   ComputeDeltaLInto(ws.ready[i % ws.ready.size()], fitted, ws.delta_l);
+                   Sink(ws, ws.delta_l.data());
+                 }});
+  }
+  {
+    // Two lobes as the estimator finds them on the simulated SR-2, three iterations: the three
+    // registers in and out.
+    ScatteringOptions so;
+    so.lobes = {{0.0005, 8.0}, {0.0008, 48.0}};
+    s.push_back({"scattering compensation (2 lobes, 3 iterations)", 6 + 6, 1, true,
+                 [so](Workspace& ws, std::size_t i) {
+                   CompensateScatteringInto(ws.frames[i % ws.frames.size()], so, ws.scatter_out);
+                   Sink(ws, ws.scatter_out.distance.data());
+                 }});
+  }
+  // Dual-frequency unwrapping of a frame with its predecessor: the current frame's distance,
+  // ΔL and flags are restored (4 + 4 + 2 both ways) and both frames' read.
+  s.push_back({"frame pair (dual-frequency unwrap)", 10 + 10 + 10 + 10, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 const MetricFrame& in = ws.pair_17[i % ws.pair_17.size()];
+                 MetricFrame& m = ws.pair_work;
+                 m.radial_distance_m = in.radial_distance_m;
+                 m.delta_l_m = in.delta_l_m;
+                 m.flags = in.flags;
+                 m.info = in.info;
+                 CombineFramePair(ws.ready[(i + 1) % ws.ready.size()], m);
+                 Sink(ws, m.radial_distance_m.data());
+               }});
+  s.push_back({"filter: uncertainty (ΔL + edges)", 4 + 4 + 2 + 2, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 const Image<PixelFlags> f = UncertaintyFilter(ws.ready[i % ws.ready.size()]);
+                 Sink(ws, f.data());
                }});
   // Five frames at -60..60 degrees into the 180-degree cloud and panorama; per input frame.
   s.push_back(
