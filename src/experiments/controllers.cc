@@ -373,8 +373,8 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     }
   }
   r.tables.push_back(others);
-  text << "\nThe adaptive controllers on the `demo` sequence and the static `hand` scene "
-          "(clipping: truth-saturated pixels; valid: after the pipeline's filters):\n";
+  text << "\nThe second table: the adaptive controllers on the `demo` sequence and the static "
+          "`hand` scene (clipping: truth-saturated pixels; valid: after the pipeline's filters).\n";
   r.text = text.str();
   return r;
 }
