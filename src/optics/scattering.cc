@@ -34,29 +34,57 @@ std::array<int, 3> BoxWidths(double sigma) {
   return w;
 }
 
-// One centred box of odd `width` along a line of n values with stride `stride`, zero outside.
-void BoxLine(float* line, std::size_t stride, int n, int width, std::vector<double>& prefix) {
-  prefix.assign(static_cast<std::size_t>(n) + 1, 0.0);
-  for (int i = 0; i < n; ++i) {
-    prefix[static_cast<std::size_t>(i) + 1] =
-        prefix[static_cast<std::size_t>(i)] + line[static_cast<std::size_t>(i) * stride];
-  }
+// One centred box of odd `width` along each row, zero outside: a running sum per row.
+void BoxRows(std::vector<float>& img, int w, int h, int width, std::vector<double>& prefix) {
   const int r = width / 2;
   const double inv = 1.0 / width;
-  for (int i = 0; i < n; ++i) {
-    const int lo = std::max(i - r, 0), hi = std::min(i + r, n - 1);
-    line[static_cast<std::size_t>(i) * stride] = static_cast<float>(
-        (prefix[static_cast<std::size_t>(hi) + 1] - prefix[static_cast<std::size_t>(lo)]) * inv);
+  prefix.resize(static_cast<std::size_t>(w) + 1);
+  for (int row = 0; row < h; ++row) {
+    float* line = &img[static_cast<std::size_t>(row) * w];
+    prefix[0] = 0.0;
+    for (int i = 0; i < w; ++i) prefix[static_cast<std::size_t>(i) + 1] = prefix[i] + line[i];
+    for (int i = 0; i < w; ++i) {
+      const int lo = std::max(i - r, 0), hi = std::min(i + r, w - 1);
+      line[i] = static_cast<float>((prefix[static_cast<std::size_t>(hi) + 1] - prefix[lo]) * inv);
+    }
   }
+}
+
+// The same along each column, all columns at once row by row (contiguous, vectorises): the sum
+// of rows [row - r, row + r] is kept per column and updated by one row in, one row out.
+void BoxColumns(std::vector<float>& img, int w, int h, int width, std::vector<double>& sum,
+                std::vector<float>& out) {
+  const int r = width / 2;
+  const double inv = 1.0 / width;
+  sum.assign(static_cast<std::size_t>(w), 0.0);
+  out.resize(img.size());
+  for (int row = 0; row < std::min(r, h); ++row) {
+    const float* in = &img[static_cast<std::size_t>(row) * w];
+    for (int c = 0; c < w; ++c) sum[c] += in[c];
+  }
+  for (int row = 0; row < h; ++row) {
+    if (row + r < h) {
+      const float* in = &img[static_cast<std::size_t>(row + r) * w];
+      for (int c = 0; c < w; ++c) sum[c] += in[c];
+    }
+    if (row - r - 1 >= 0) {
+      const float* gone = &img[static_cast<std::size_t>(row - r - 1) * w];
+      for (int c = 0; c < w; ++c) sum[c] -= gone[c];
+    }
+    float* o = &out[static_cast<std::size_t>(row) * w];
+    for (int c = 0; c < w; ++c) o[c] = static_cast<float>(sum[c] * inv);
+  }
+  img.swap(out);
 }
 
 // Almost-Gaussian blur of sigma, in place, zero padding.
 void GaussBlur(std::vector<float>& img, int w, int h, double sigma) {
-  std::vector<double> prefix;
+  thread_local std::vector<double> prefix;
+  thread_local std::vector<float> out;
   for (int width : BoxWidths(sigma)) {
     if (width <= 1) continue;
-    for (int r = 0; r < h; ++r) BoxLine(&img[static_cast<std::size_t>(r) * w], 1, w, width, prefix);
-    for (int c = 0; c < w; ++c) BoxLine(&img[static_cast<std::size_t>(c)], w, h, width, prefix);
+    BoxRows(img, w, h, width, prefix);
+    BoxColumns(img, w, h, width, prefix, out);
   }
 }
 
