@@ -15,6 +15,7 @@
 #include "camera_source.h"
 #include "commands.h"
 #include "tofcam/calibration/calibration_procedure.h"
+#include "tofcam/calibration/scattering_calibration.h"
 #include "tofcam/core/error.h"
 #include "tofcam/io/calibration_file.h"
 
@@ -40,6 +41,9 @@ struct CalibrateOptions {
   bool setpoint = false;
   std::string setpoint_camera;  // "" = --camera
   int setpoint_steps = 32;
+  std::string scattering_target;  // camera with the bright card; "" = no scattering calibration
+  int scattering_frames = 8;
+  int scattering_register = 0;
   bool wall = false;  // --wall-distance-m given
   CameraSourceOptions source;
 };
@@ -109,6 +113,27 @@ void RunNoiseCalibration(Camera& camera, OffsetCalibration& calibration, int fra
         100 * m.eq2.max_decile_error, m.held_out_pixels);
   }
   std::printf("noise model %s\n", model.note.c_str());
+}
+
+// The point-spread of the camera's optics from the wall (--camera) and the same wall with a
+// bright card near the lens (--scattering-target).
+void RunScatteringCalibration(const CalibrateOptions& o, OffsetCalibration& calibration) {
+  std::unique_ptr<Camera> wall = OpenCamera(o.camera, o.source);
+  std::unique_ptr<Camera> card = OpenCamera(o.scattering_target, o.source);
+  CheckCalibrationMatches(calibration, card->Info());
+  ScatteringCalibrationOptions options;
+  options.frames = o.scattering_frames;
+  options.integration_time_register = o.scattering_register;
+  calibration.scattering = CalibrateScattering(*wall, *card, options, Progress);
+  const ScatteringCalibration& s = *calibration.scattering;
+  std::printf(
+      "scattering point-spread (register %d, %d frames per scene, %d card pixels, %d fit "
+      "pixels, %.3f of the stray light explained):",
+      s.integration_time_register, s.frames, s.target_pixels, s.fit_pixels, s.explained_fraction);
+  for (const ScatteringLobe& l : s.lobes) {
+    std::printf(" weight %.4g at sigma %.3g px;", l.weight, l.sigma_px);
+  }
+  std::printf("\n");
 }
 
 // The camera of --setpoint, opened and checked before any long phase runs, so that a camera
@@ -191,6 +216,10 @@ void KeepPreviousMeasurements(const CalibrateOptions& o, const CameraInfo& info,
       calibration.controller_setpoint = previous.controller_setpoint;
       std::printf("kept the controller set point of the previous %s\n", o.out.c_str());
     }
+    if (o.scattering_target.empty() && previous.scattering) {
+      calibration.scattering = previous.scattering;
+      std::printf("kept the scattering point-spread of the previous %s\n", o.out.c_str());
+    }
   } catch (const Error& e) {
     std::printf("replacing %s, whose measurements do not carry over (%s)\n", o.out.c_str(),
                 e.what());
@@ -198,10 +227,22 @@ void KeepPreviousMeasurements(const CalibrateOptions& o, const CameraInfo& info,
 }
 
 void RunCalibrate(const CalibrateOptions& o) {
-  if (!o.wall && !o.noise && !o.setpoint) {
+  const bool scattering = !o.scattering_target.empty();
+  if (!o.wall && !o.noise && !o.setpoint && !scattering) {
     throw Error(ErrorCode::kInvalidArgument,
-                "nothing to calibrate: give --wall-distance-m (wall calibration), --noise and/or "
-                "--setpoint");
+                "nothing to calibrate: give --wall-distance-m (wall calibration), --noise, "
+                "--setpoint and/or --scattering-target");
+  }
+  if (scattering) {
+    ScatteringCalibrationOptions check;
+    check.frames = o.scattering_frames;
+    check.integration_time_register = o.scattering_register;
+    try {
+      check.Validate();
+    } catch (const Error& e) {
+      throw Error(e.code(),
+                  std::string("--scattering-frames / --scattering-register: ") + e.what());
+    }
   }
   if (o.noise_frames < 3 || o.noise_frames > 100000) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -236,6 +277,7 @@ void RunCalibrate(const CalibrateOptions& o) {
     }
     if (o.noise) RunNoiseCalibration(*camera, calibration, o.noise_frames);
     camera.reset();
+    if (scattering) RunScatteringCalibration(o, calibration);
     if (setpoint_source) SetpointSweep(*setpoint_source, calibration);
     SaveCalibration(o.out, calibration);
     std::printf("wrote %s\n", o.out.c_str());
@@ -370,6 +412,7 @@ void RunCalibrate(const CalibrateOptions& o) {
   }
   KeepPreviousMeasurements(o, camera_info, calibration);
   camera.reset();
+  if (scattering) RunScatteringCalibration(o, calibration);
   if (setpoint_source) SetpointSweep(*setpoint_source, calibration);
   SaveCalibration(o.out, calibration);
   std::printf("wrote %s\n", o.out.c_str());
@@ -418,6 +461,17 @@ void SetupCalibrateCommand(CLI::App& app) {
                 "Noise calibration from static frames of --camera: eq. 2's scale and, with >= 4 "
                 "frames, a fitted noise model (docs/noise_model.md; stored in --out)");
   sub->add_option("--noise-frames", o->noise_frames, "Static frames for --noise (3..100000)")
+      ->capture_default_str();
+  sub->add_option("--scattering-target", o->scattering_target,
+                  "The same wall as --camera with a small bright card near the lens, e.g. "
+                  "sim:calibration/scattering-card: measures the optics' scattering point-spread "
+                  "for the pipeline's compensation (docs/beyond.md; stored in --out)");
+  sub->add_option("--scattering-frames", o->scattering_frames,
+                  "Frames per scene for --scattering-target (1..10000)")
+      ->capture_default_str();
+  sub->add_option("--scattering-register", o->scattering_register,
+                  "Register for --scattering-target; 0 = the longest at which the card does not "
+                  "clip")
       ->capture_default_str();
   sub->add_flag("--setpoint", o->setpoint,
                 "Integration-time sweep of the working scene: the controller's I_A, c_0, V_p "

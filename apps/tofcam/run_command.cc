@@ -63,6 +63,7 @@ struct RunOptions {
   long long frames = 0;
   std::string config;
   std::string calibration;
+  std::string alternate_calibration;
   std::string controller;
   std::string out;
   int png_every = 0;
@@ -111,6 +112,9 @@ PipelineOptions ResolveOptions(const RunOptions& o, std::set<std::string>* given
   PipelineOptions options =
       o.config.empty() ? PipelineOptions{} : LoadPipelineConfig(o.config, given_keys);
   if (!o.calibration.empty()) options.calibration_file = o.calibration;
+  if (!o.alternate_calibration.empty()) {
+    options.alternate_calibration_file = o.alternate_calibration;
+  }
   if (o.fps >= 0.0) {
     options.controller.frame_rate_hz = o.fps;
     if (given_keys != nullptr) given_keys->insert("controller.frame_rate_hz");
@@ -257,6 +261,18 @@ void RunRun(const RunOptions& o) {
   }
   std::fprintf(stderr, "run: dL scale %.4g from %s\n", options.accuracy.scale,
                from.delta_l_scale.c_str());
+  if (options.scattering_enabled) {
+    std::string lobes;
+    for (const ScatteringLobe& l : options.scattering.lobes) {
+      if (l.weight <= 0.0) continue;
+      char text[64];
+      std::snprintf(text, sizeof text, "%s%.3g at %.3g px", lobes.empty() ? "" : ", ", l.weight,
+                    l.sigma_px);
+      lobes += text;
+    }
+    std::fprintf(stderr, "run: scattering compensation on (%s) from %s\n",
+                 lobes.empty() ? "no lobes" : lobes.c_str(), from.scattering.c_str());
+  }
   Pipeline pipeline(options, camera->Info());
   if (controlling) {
     const ControllerOptions& c = pipeline.options().controller;
@@ -467,6 +483,9 @@ void SetupRunCommand(CLI::App& app) {
   sub->add_option("--config", o->config, "Pipeline configuration (YAML; see --print-config)");
   sub->add_option("--calibration", o->calibration,
                   "Calibration file (tofcam calibrate); overrides the config's");
+  sub->add_option("--alternate-calibration", o->alternate_calibration,
+                  "Calibration made at frame_pair's alternate modulation frequency (dual-frequency "
+                  "runs with a calibration need one); overrides the config's");
   sub->add_option(
       "--controller", o->controller,
       "may-proportional, may-incremental, vendor-histogram, fixed, model-based or none; "

@@ -161,6 +161,26 @@ void NoiseCalibration::Validate() const {
   }
 }
 
+void ScatteringCalibration::Validate() const {
+  if (lobes.empty() || lobes.size() > 2) {
+    Bad("scattering: " + std::to_string(lobes.size()) + " lobes, expected 1 or 2");
+  }
+  ScatteringOptions psf;
+  psf.lobes = lobes;
+  try {
+    psf.Validate();
+  } catch (const Error& e) {
+    Bad(std::string("scattering: ") + e.what());
+  }
+  if (frames < 1) Bad("scattering.frames = " + std::to_string(frames) + " must be >= 1");
+  if (integration_time_register < 0 || target_pixels < 0 || fit_pixels < 0) {
+    Bad("scattering: register and pixel counts must be >= 0");
+  }
+  if (!(explained_fraction >= 0.0 && explained_fraction <= 1.0)) {
+    Bad("scattering.explained_fraction = " + Num(explained_fraction) + " must be in [0, 1]");
+  }
+}
+
 void OffsetCalibration::Validate() const {
   if (version != kVersion) Bad("version " + std::to_string(version) + " is not supported");
   if (width <= 0 || height <= 0) {
@@ -210,6 +230,7 @@ void OffsetCalibration::Validate() const {
   }
   if (noise) noise->Validate();
   if (controller_setpoint) controller_setpoint->Validate();
+  if (scattering) scattering->Validate();
 }
 
 double ExposureShiftM(const OffsetCalibration& calibration, double integration_time_us) noexcept {

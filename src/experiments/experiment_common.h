@@ -77,6 +77,9 @@ sim::SimulatorOptions Sim(const ExperimentOptions& o, std::uint64_t offset, int 
 
 // Calibrating costs ~2 s; experiments run in one process share it (keyed by seed).
 const Shared& GetShared(const ExperimentOptions& o);
+// The same calibration of the simulated SR-2 run at another modulation frequency (the camera
+// model's only one), for dual-frequency pipelines; keyed by seed and frequency.
+const Shared& GetSharedAt(const ExperimentOptions& o, double modulation_frequency_hz);
 
 // Pipeline without controller and cloud, calibrated, ΔL in metres of σ (noise-calibrated).
 PipelineOptions BaseOptions(const Shared& s);
@@ -207,5 +210,6 @@ ExperimentResult Calibration(const ExperimentOptions& o);
 ExperimentResult Controllers(const ExperimentOptions& o);
 ExperimentResult Filters(const ExperimentOptions& o);
 ExperimentResult RealData(const ExperimentOptions& o);
+ExperimentResult Beyond(const ExperimentOptions& o);
 
 }  // namespace tofcam::experiments::internal

@@ -26,8 +26,8 @@ void ExperimentOptions::Validate() const {
 }
 
 std::vector<std::string> ExperimentNames() {
-  return {"fig2",   "fig3",        "fig5",        "fig6-7",  "fig8-9",   "fig10-11",
-          "mirror", "calibration", "controllers", "filters", "real-data"};
+  return {"fig2",   "fig3",        "fig5",        "fig6-7",  "fig8-9",    "fig10-11",
+          "mirror", "calibration", "controllers", "filters", "real-data", "beyond"};
 }
 
 ExperimentResult RunExperiment(const std::string& name, const ExperimentOptions& options) {
@@ -43,7 +43,8 @@ ExperimentResult RunExperiment(const std::string& name, const ExperimentOptions&
                   {"calibration", internal::Calibration},
                   {"controllers", internal::Controllers},
                   {"filters", internal::Filters},
-                  {"real-data", internal::RealData}};
+                  {"real-data", internal::RealData},
+                  {"beyond", internal::Beyond}};
   const auto it = kRunners.find(name);
   if (it == kRunners.end()) {
     std::string known;

@@ -37,6 +37,10 @@ void FramePairOptions::Validate() const {
   if (!(min_tolerance_m >= 0.0 && min_tolerance_m <= 10.0)) {
     Bad("frame pair min_tolerance_m = " + std::to_string(min_tolerance_m) + " must be in [0, 10]");
   }
+  if (!(max_amplitude_ratio == 0.0 || (max_amplitude_ratio >= 1.0 && max_amplitude_ratio <= 1e6))) {
+    Bad("frame pair max_amplitude_ratio = " + std::to_string(max_amplitude_ratio) +
+        " must be 0 (no check) or in [1, 1e6]");
+  }
 }
 
 void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
@@ -61,6 +65,19 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
     if (g > 0) range = std::min(range, UnambiguousRangeM(static_cast<double>(g)));
   }
   const int max_n1 = dual ? static_cast<int>(std::floor(range / l1)) : 0;
+  // Amplitudes compare per µs of exposure; without known times only equal exposures compare.
+  const double t1 = previous.info.integration_time_us, t2 = current.info.integration_time_us;
+  double amplitude_scale = 0.0;  // A1 x scale is comparable with A2; 0 = no check
+  if (options.max_amplitude_ratio > 0.0) {
+    if (t1 > 0.0 && t2 > 0.0) {
+      amplitude_scale = t2 / t1;
+    } else if (previous.info.integration_time_register == current.info.integration_time_register) {
+      amplitude_scale = 1.0;
+    }
+  }
+  const double max_log_ratio = amplitude_scale > 0.0 ? std::log(options.max_amplitude_ratio) : 0.0;
+  const bool amplitudes = amplitude_scale > 0.0 && previous.amplitude.SameSize(w, h) &&
+                          current.amplitude.SameSize(w, h);
   const std::size_t n = current.radial_distance_m.size();
   for (std::size_t i = 0; i < n; ++i) {
     const bool ok1 = Good(previous, i), ok2 = Good(current, i);
@@ -82,25 +99,37 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
     }
     const double d1 = previous.radial_distance_m[i], d2 = current.radial_distance_m[i];
     const double s1 = previous.delta_l_m[i], s2 = current.delta_l_m[i];
+    const double tolerance = std::max(options.max_disagreement_sigma * std::sqrt(s1 * s1 + s2 * s2),
+                                      options.min_tolerance_m);
     double a = d1, b = d2;
+    bool ambiguous = false;
     if (dual) {
-      double best = 1e300;
+      double best = 1e300, second = 1e300;
       for (int n1 = 0; n1 <= max_n1; ++n1) {
         const double e1 = d1 + n1 * l1;
         const double n2 = std::max(0.0, std::round((e1 - d2) / l2));
         const double e2 = d2 + n2 * l2;
-        if (std::abs(e1 - e2) < best) {
-          best = std::abs(e1 - e2);
+        const double disagreement = std::abs(e1 - e2);
+        if (disagreement < best) {
+          second = best;
+          best = disagreement;
           a = e1;
           b = e2;
+        } else if (disagreement < second) {
+          second = disagreement;
         }
       }
+      ambiguous = second <= tolerance;
     } else {
       a = d1 - l1 * std::round((d1 - d2) / l1);  // the same surface near the 0 / L seam
     }
-    const double tolerance = std::max(options.max_disagreement_sigma * std::sqrt(s1 * s1 + s2 * s2),
-                                      options.min_tolerance_m);
-    if (!(std::abs(a - b) <= tolerance)) {
+    bool moved = false;
+    if (amplitudes) {
+      const double a1 = previous.amplitude[i] * amplitude_scale, a2 = current.amplitude[i];
+      // Both positive or the check cannot tell (a zero amplitude has no phase anyway).
+      moved = a1 > 0.0 && a2 > 0.0 && std::abs(std::log(a2 / a1)) > max_log_ratio;
+    }
+    if (!(std::abs(a - b) <= tolerance) || ambiguous || moved) {
       current.flags[i] |= Flag::kInconsistent;
       if (dual) current.radial_distance_m[i] = static_cast<float>(b);
       continue;

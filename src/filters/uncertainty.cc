@@ -51,11 +51,16 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
         const int rr = r + dr[k], cc = c + dc[k];
         if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
         const std::size_t j = static_cast<std::size_t>(rr) * w + cc;
+        if (frame.flags[j].Any(options.unknown_neighbour_flags)) {
+          jump = std::numeric_limits<double>::infinity();
+          break;
+        }
         if (!usable(j)) continue;
         const double step = std::abs(frame.radial_distance_m[j] - d);
         const double sj = frame.delta_l_m[j];
         if (step > options.min_jump_sigma * std::sqrt(s * s + sj * sj)) jump = std::max(jump, step);
       }
+      if (std::isinf(jump)) continue;  // next to a clipped pixel: unbounded
       const double e = options.edge_fraction * jump;
       out[i] = static_cast<float>(std::sqrt(s * s + e * e));
     }
@@ -68,8 +73,11 @@ Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame, const UncertaintyO
   Image<PixelFlags> out(frame.width(), frame.height());
   const float max = static_cast<float>(options.max_uncertainty_m);
   for (std::size_t i = 0; i < u.size(); ++i) {
-    // Rejected pixels (u = inf) already carry their reason; only usable ones are judged.
-    if (std::isfinite(u[i]) && u[i] > max) out[i] = PixelFlags(Flag::kLowConfidence);
+    // Rejected pixels (u = inf) already carry their reason; the others are judged (u = inf
+    // there: next to a clipped pixel, or no ΔL).
+    if (!frame.flags[i].Any(kRejectMask) && !(u[i] <= max)) {
+      out[i] = PixelFlags(Flag::kLowConfidence);
+    }
   }
   return out;
 }

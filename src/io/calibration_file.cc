@@ -204,6 +204,22 @@ void SaveCalibration(const std::filesystem::path& path, const OffsetCalibration&
     out << YAML::Key << "scene" << YAML::Value << YAML::DoubleQuoted << p.scene;
     out << YAML::EndMap;
   }
+  if (calibration.scattering) {
+    const ScatteringCalibration& sc = *calibration.scattering;
+    out << YAML::Key << "scattering" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "lobes" << YAML::Value << YAML::BeginSeq;
+    for (const ScatteringLobe& l : sc.lobes) {
+      out << YAML::Flow << YAML::BeginMap << YAML::Key << "weight" << YAML::Value << l.weight
+          << YAML::Key << "sigma_px" << YAML::Value << l.sigma_px << YAML::EndMap;
+    }
+    out << YAML::EndSeq;
+    out << YAML::Key << "frames" << YAML::Value << sc.frames;
+    out << YAML::Key << "integration_time_register" << YAML::Value << sc.integration_time_register;
+    out << YAML::Key << "target_pixels" << YAML::Value << sc.target_pixels;
+    out << YAML::Key << "fit_pixels" << YAML::Value << sc.fit_pixels;
+    out << YAML::Key << "explained_fraction" << YAML::Value << sc.explained_fraction;
+    out << YAML::EndMap;
+  }
   out << YAML::EndMap;
   if (!out.good()) {
     throw Error(ErrorCode::kInternal, "calibration YAML emitter: " + out.GetLastError());
@@ -253,6 +269,7 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
                                 "uncalibrated_pixels",
                                 "distance_correction"};
   if (file_version >= 2) keys.insert({"exposure_offset_m_per_ms", "noise", "controller_setpoint"});
+  if (file_version >= 3) keys.insert("scattering");
   in.CheckKeys(root, keys, "calibration version " + std::to_string(file_version));
   c.version = OffsetCalibration::kVersion;
   c.camera_model = in.String(in.Required(root, "camera_model"), "camera_model");
@@ -363,6 +380,43 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
                                          "controller_setpoint.intensity_per_register");
     p.scene = in.String(in.Required(sp, "scene"), "controller_setpoint.scene");
     c.controller_setpoint = std::move(p);
+  }
+
+  if (const YAML::Node sc = root["scattering"]) {
+    in.CheckKeys(sc,
+                 {"lobes", "frames", "integration_time_register", "target_pixels", "fit_pixels",
+                  "explained_fraction"},
+                 "scattering");
+    ScatteringCalibration k;
+    const YAML::Node lobes = in.Sequence(in.Required(sc, "lobes"), "scattering.lobes", 0);
+    if (lobes.size() < 1 || lobes.size() > 2) {
+      in.Fail(lobes,
+              "scattering.lobes has " + std::to_string(lobes.size()) + " entries, expected 1 or 2");
+    }
+    for (const YAML::Node& lobe : lobes) {
+      in.CheckKeys(lobe, {"weight", "sigma_px"}, "scattering.lobes entry");
+      ScatteringLobe l;
+      l.weight = in.Double(in.Required(lobe, "weight"), "scattering.lobes.weight");
+      l.sigma_px = in.Double(in.Required(lobe, "sigma_px"), "scattering.lobes.sigma_px");
+      k.lobes.push_back(l);
+    }
+    k.frames =
+        static_cast<int>(in.Integer(in.Required(sc, "frames"), "scattering.frames", 1, 1 << 30));
+    k.integration_time_register =
+        static_cast<int>(in.Integer(in.Required(sc, "integration_time_register"),
+                                    "scattering.integration_time_register", 0, 65535));
+    k.target_pixels = static_cast<int>(
+        in.Integer(in.Required(sc, "target_pixels"), "scattering.target_pixels", 0, 1 << 30));
+    k.fit_pixels = static_cast<int>(
+        in.Integer(in.Required(sc, "fit_pixels"), "scattering.fit_pixels", 0, 1 << 30));
+    k.explained_fraction =
+        in.Double(in.Required(sc, "explained_fraction"), "scattering.explained_fraction");
+    try {
+      k.Validate();
+    } catch (const Error& e) {
+      in.Fail(sc, e.what());
+    }
+    c.scattering = std::move(k);
   }
 
   const YAML::Node rows =

@@ -44,6 +44,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
   });
   v.Section("calibration", "Stage 2: per-pixel offsets, eq. 1 (tofcam calibrate writes them)", [&] {
     v.Field("file", o.calibration_file, "calibration file, \"\" = none; relative to this file");
+    v.Field("alternate_file", o.alternate_calibration_file,
+            "calibration made at frame_pair's alternate frequency, \"\" = none");
   });
   v.Section("scattering", "compensation of in-camera scattering, before stage 1 (not in the paper)",
             [&] {
@@ -114,6 +116,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("max_uncertainty_m", o.uncertainty.max_uncertainty_m, "m, (0, 100]");
     v.Field("edge_fraction", o.uncertainty.edge_fraction, "part of an edge's jump, [0, 1]");
     v.Field("min_jump_sigma", o.uncertainty.min_jump_sigma, "steps below are noise, (0, 100]");
+    v.Field("unknown_neighbour_flags", FlagMask{o.uncertainty.unknown_neighbour_flags},
+            "a pixel next to one with any of these flags is flagged");
   });
   v.Section("smoothing", "edge-preserving spatial smoothing of kept distances (not in the paper)",
             [&] {
@@ -138,15 +142,20 @@ void VisitOptions(V& v, PipelineOptions& o) {
             "rejected frames before a pixel is forgotten, [0, 255]");
     v.Field("fallback_sigma_m", o.temporal.fallback_sigma_m, "σ where ΔL is missing, m, > 0");
   });
-  v.Section("frame_pair", "dual-frequency unwrapping of consecutive frames (not in the paper)",
+  v.Section("frame_pair",
+            "consecutive frames combined: dual-frequency unwrapping or HDR (not in the paper)",
             [&] {
               v.Field("enabled", o.frame_pair_enabled, "needs accuracy.enabled");
               v.Field("alternate_modulation_frequency_hz", o.alternate_modulation_frequency_hz,
                       "Hz; 0 = do not alternate; e.g. 17000000 with a 20 MHz camera");
+              v.Field("hdr_exposure_ratio", o.hdr_exposure_ratio,
+                      "0 = off; else every other frame this many times longer, [1.5, 64]");
               v.Field("max_range_m", o.frame_pair.max_range_m, "m, (0, 1000]");
               v.Field("max_disagreement_sigma", o.frame_pair.max_disagreement_sigma,
                       "kInconsistent beyond this many combined σ, (0, 1000]");
               v.Field("min_tolerance_m", o.frame_pair.min_tolerance_m, "m, [0, 10]");
+              v.Field("max_amplitude_ratio", o.frame_pair.max_amplitude_ratio,
+                      "amplitude per µs change beyond which a pixel moved; 0 = off, [1, 1e6]");
             });
   v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");
@@ -505,9 +514,10 @@ PipelineOptions ParsePipelineConfig(std::string_view yaml_text, const std::strin
   VisitOptions(reader, options);
   reader.CheckUnknownKeys();
 
-  if (!options.calibration_file.empty() && !base_dir.empty()) {
-    const std::filesystem::path file(options.calibration_file);
-    if (file.is_relative()) options.calibration_file = (base_dir / file).string();
+  for (std::string* name : {&options.calibration_file, &options.alternate_calibration_file}) {
+    if (name->empty() || base_dir.empty()) continue;
+    const std::filesystem::path file(*name);
+    if (file.is_relative()) *name = (base_dir / file).string();
   }
   try {
     options.Validate();
@@ -538,6 +548,14 @@ void LoadPipelineCalibration(PipelineOptions& options, const CameraInfo& camera)
     options.calibration = LoadCalibration(options.calibration_file);
   }
   if (options.calibration) CheckCalibrationMatches(*options.calibration, camera);
+  if (!options.alternate_calibration && !options.alternate_calibration_file.empty()) {
+    options.alternate_calibration = LoadCalibration(options.alternate_calibration_file);
+  }
+  if (options.alternate_calibration) {
+    CameraInfo alternate = camera;
+    alternate.modulation_frequency_hz = options.alternate_modulation_frequency_hz;
+    CheckCalibrationMatches(*options.alternate_calibration, alternate);
+  }
 }
 
 }  // namespace tofcam
@@ -600,6 +618,20 @@ MeasuredDefaults ApplyMeasuredDefaults(PipelineOptions& options,
              : "the configuration";
   } else {
     from.controller = "the configuration or the defaults";
+  }
+  const bool scattering_given =
+      std::any_of(given_keys.begin(), given_keys.end(),
+                  [](const std::string& key) { return key.rfind("scattering.", 0) == 0; });
+  if (scattering_given) {
+    from.scattering = "the configuration";
+  } else if (c && c->scattering) {
+    options.scattering_enabled = true;
+    options.scattering.lobes = c->scattering->lobes;
+    from.scattering = "the calibration file's point-spread (" +
+                      std::to_string(c->scattering->lobes.size()) + " lobe(s), " +
+                      std::to_string(c->scattering->frames) + " frames per scene)";
+  } else {
+    from.scattering = "none measured (tofcam calibrate --scattering-target measures it)";
   }
   options.Validate();
   return from;

@@ -47,6 +47,29 @@ void PipelineOptions::Validate() const {
       throw Error(ErrorCode::kInvalidArgument,
                   "alternate_modulation_frequency_hz must be 0 (none) or a frequency > 0");
     }
+    if (alternate_calibration) {
+      if (alternate_modulation_frequency_hz == 0.0) {
+        throw Error(ErrorCode::kInvalidArgument,
+                    "alternate_calibration is set but alternate_modulation_frequency_hz is 0");
+      }
+      alternate_calibration->Validate();
+    }
+  });
+  ValidateSection("frame_pair", [&] {
+    if (hdr_exposure_ratio != 0.0 && !(hdr_exposure_ratio >= 1.5 && hdr_exposure_ratio <= 64.0)) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "hdr_exposure_ratio must be 0 (off) or in [1.5, 64], got " +
+                      std::to_string(hdr_exposure_ratio));
+    }
+    if (hdr_exposure_ratio > 0.0 && !frame_pair_enabled) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "hdr_exposure_ratio needs frame_pair.enabled (the merge of the two exposures)");
+    }
+    if (hdr_exposure_ratio > 0.0 && alternate_modulation_frequency_hz > 0.0) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "hdr_exposure_ratio and alternate_modulation_frequency_hz both pair "
+                  "consecutive frames: use one of them");
+    }
   });
   if (frame_pair_enabled && !accuracy_enabled) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -69,6 +92,21 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
   }
   rays_ = MakeRayTable(camera_.intrinsics);
   table_ = pipeline_internal::PrepareTable(options_.calibration, camera_);
+  if (options_.alternate_calibration) {
+    // The alternate calibration must fit the same camera running at the alternate frequency.
+    CameraInfo alternate = camera_;
+    alternate.modulation_frequency_hz = options_.alternate_modulation_frequency_hz;
+    pipeline_internal::CheckCalibrationFits(*options_.alternate_calibration, alternate);
+    alternate_table_ = pipeline_internal::PrepareTable(options_.alternate_calibration, alternate);
+  } else if (options_.calibration && options_.alternate_modulation_frequency_hz > 0.0) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "the pipeline alternates to " +
+                    std::to_string(options_.alternate_modulation_frequency_hz) +
+                    " Hz but the calibration was made at " +
+                    std::to_string(options_.calibration->modulation_frequency_hz) +
+                    " Hz only: calibrate at the alternate frequency too (alternate_calibration) "
+                    "or run without a calibration");
+  }
 
   // The controller may not ask for a register the camera refuses; its own lower bound is 1.
   ControllerOptions& c = options_.controller;
@@ -104,6 +142,7 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
     c.bias_register = std::clamp(c.bias_register, lo, hi);
   }
   if (options_.controller_enabled) controller_ = MakeController(c);
+  hdr_base_register_ = c.bias_register;
   if (options_.temporal_enabled) temporal_.emplace(options_.temporal);
   if (options_.frame_pair_enabled) pair_.emplace(options_.frame_pair);
 
@@ -144,6 +183,14 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   s.calibration = options_.calibration ? &*options_.calibration : nullptr;
   s.table = table_ ? &*table_ : nullptr;
   s.table_range_m = UnambiguousRangeM(camera_.modulation_frequency_hz);
+  if (options_.alternate_modulation_frequency_hz > 0.0 &&
+      frame.info.modulation_frequency_hz != camera_.modulation_frequency_hz) {
+    // A frame at the alternate frequency: its own calibration, or none.
+    const std::optional<OffsetCalibration>& alt = options_.alternate_calibration;
+    s.calibration = alt ? &*alt : nullptr;
+    s.table = alternate_table_ ? &*alternate_table_ : nullptr;
+    s.table_range_m = UnambiguousRangeM(options_.alternate_modulation_frequency_hz);
+  }
   s.accuracy = options_.accuracy_enabled ? &options_.accuracy : nullptr;
   s.filters = filters;
   s.rays = &rays_;
@@ -159,8 +206,15 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
     ConfidenceThresholdInto(m, filters.confidence, result.filter_flags);
     MergeFlags(m, result.filter_flags);
   }
-  // Dual-frequency unwrapping: after the per-pixel filters (each frame's own ΔL judged it),
-  // before the neighbourhood filters (which then see unwrapped distances).
+  // HDR: the controller judges the base exposure alone, before the merge could hide its
+  // clipped or dark pixels behind the long exposure's.
+  const bool hdr = options_.hdr_exposure_ratio > 0.0;
+  const bool hdr_long = hdr && hdr_long_;
+  if (hdr && !hdr_long) {
+    hdr_base_register_ = controller_ ? controller_->Update(m) : m.info.integration_time_register;
+  }
+  // Dual-frequency unwrapping or the HDR merge: after the per-pixel filters (each frame's own ΔL
+  // judged it), before the neighbourhood filters (which then see the combined distances).
   result.combined = pair_ ? pair_->Process(m) : false;
   if (neighbourhood) {
     // m.flags = input flags | per-pixel filter bits, what the neighbourhood filters must treat
@@ -184,8 +238,14 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   if (!options_.cloud_enabled) result.cloud = PointCloud();
 
   // Frame t sets the register of frame t + 1 (paper section III-A).
-  result.next_integration_register =
-      controller_ ? controller_->Update(m) : m.info.integration_time_register;
+  if (hdr) {
+    result.next_integration_register =
+        hdr_long ? hdr_base_register_ : LongExposureRegister(hdr_base_register_);
+    hdr_long_ = !hdr_long;
+  } else {
+    result.next_integration_register =
+        controller_ ? controller_->Update(m) : m.info.integration_time_register;
+  }
 
   result.next_modulation_frequency_hz = m.info.modulation_frequency_hz;
   if (options_.alternate_modulation_frequency_hz > 0.0) {
@@ -215,6 +275,20 @@ void Pipeline::ResetTemporal() {
 
 void Pipeline::ResetController(int reg) {
   if (controller_) controller_->Reset(reg);
+  hdr_base_register_ = reg;
+  hdr_long_ = false;
+}
+
+int Pipeline::LongExposureRegister(int base_register) const {
+  const ControllerOptions& c = options_.controller;
+  const double step_us = camera_.integration_time_step_us;
+  if (!(step_us > 0.0)) return base_register;
+  // Integration time = base + register x step: the register whose time is ratio x the base's,
+  // rounded down (never past the frame rate or the bounds the constructor intersected).
+  const double long_us = options_.hdr_exposure_ratio * camera_.IntegrationTimeUs(base_register);
+  const double reg = std::floor((long_us - camera_.integration_time_base_us) / step_us);
+  return static_cast<int>(std::clamp(reg, static_cast<double>(base_register),
+                                     static_cast<double>(std::max(base_register, c.max_register))));
 }
 
 void Pipeline::SetTargetIntensity(double target_intensity, int current_register) {

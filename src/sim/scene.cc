@@ -613,10 +613,17 @@ Scene LoadBuiltinScene(const std::string& name, const SceneOverrides& overrides)
 
 Scene ResolveScene(const std::string& name_or_path, const SceneOverrides& overrides) {
   const std::filesystem::path p(name_or_path);
-  if (name_or_path.find('/') != std::string::npos || p.extension() == ".yaml" ||
-      p.extension() == ".yml") {
-    return LoadScene(p, overrides);
+  const bool file_name = p.extension() == ".yaml" || p.extension() == ".yml";
+  if (!file_name) {
+    // Embedded scenes outside the built-in list (calibration/scattering-card) are named by
+    // their folder too; a file on disk of that relative name would need its extension.
+    for (int i = 0; i < internal::kEmbeddedFileCount; ++i) {
+      if (internal::kEmbeddedFiles[i].path == name_or_path + ".yaml") {
+        return LoadBuiltinScene(name_or_path, overrides);
+      }
+    }
   }
+  if (name_or_path.find('/') != std::string::npos || file_name) return LoadScene(p, overrides);
   return LoadBuiltinScene(name_or_path, overrides);
 }
 

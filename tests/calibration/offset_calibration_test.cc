@@ -385,8 +385,12 @@ TEST(OffsetCalibrationTest, ValidateNamesTheProblem) {
   c.width = 4;
   EXPECT_NE(message(c).find("header says 4x2"), std::string::npos);
   c = MakeCalibration(3, 2, 0.0f);
-  c.version = 3;
-  EXPECT_NE(message(c).find("version 3"), std::string::npos);
+  c.version = OffsetCalibration::kVersion + 1;
+  EXPECT_NE(message(c).find("version " + std::to_string(OffsetCalibration::kVersion + 1)),
+            std::string::npos);
+  c = MakeCalibration(3, 2, 0.0f);
+  c.scattering = ScatteringCalibration{};  // no lobes
+  EXPECT_NE(message(c).find("scattering"), std::string::npos) << message(c);
   c = MakeCalibration(3, 2, 0.0f);
   c.modulation_frequency_hz = 0.0;
   EXPECT_NE(message(c).find("modulation_frequency_hz"), std::string::npos);

@@ -363,6 +363,24 @@ TEST(ExperimentsTest, FiltersBeatChanceAndAThresholdRejectsASupersetAsItFalls) {
   }
 }
 
+// Issue 18's methods in closed loops on every built-in scene. Predictions from the physics, not
+// from a run: one frequency cannot keep a surface beyond L right (it reads d - L, metres off, or a
+// rejected pixel); a second frequency unwraps such surfaces; the combined set removes the
+// wrapped and scattered pixels the paper's filters keep, so its rejections score a higher F1 and
+// its kept pixels a lower RMSE. The absolute targets (F1 >= 0.9, RMSE within L <= 50 mm) are
+// not met and not asserted: docs/beyond.md.
+TEST(ExperimentsTest, BeyondMethodsBeatThePaperAndTheVendor) {
+  const ExperimentResult r = RunExperiment("beyond", Small());
+  const auto m = [&](const std::string& key) { return r.metrics.at(key); };
+  EXPECT_GT(m("beyond.f1"), m("paper.f1"));
+  EXPECT_GT(m("beyond.f1"), m("vendor.f1"));
+  EXPECT_LT(m("beyond.rmse_kept_within_l"), m("paper.rmse_kept_within_l"));
+  // A pixel 5 cm short of L could still read right by noise: "almost never", not "never".
+  EXPECT_LE(m("paper.beyond_right"), 0.01);
+  EXPECT_LE(m("vendor.beyond_right"), 0.01);
+  EXPECT_GT(m("beyond.beyond_right"), 10.0 * std::max(0.01, m("paper.beyond_right")));
+}
+
 TEST(ExperimentsTest, WritesCsvAndMarkdown) {
   const ExperimentResult r = RunExperiment("real-data", Small());
   const auto dir = std::filesystem::temp_directory_path() / "tofcam_experiments_test";

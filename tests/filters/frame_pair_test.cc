@@ -53,6 +53,56 @@ TEST(FramePair, DisagreementBeyondItsSigmaIsInconsistent) {
   EXPECT_TRUE(d.flags[0].Has(Flag::kInconsistent));
 }
 
+TEST(FramePair, AmbiguousWrapCountsAreInconsistent) {
+  // At 9 m with σ 30 cm per frame the tolerance is 4 x 0.42 = 1.7 m: the right pair (1, 1)
+  // agrees exactly, but (0, 0) (1.505 vs 0.183 m, 1.32 m apart) agrees within it too, so the
+  // noise cannot tell the two apart. With σ 5 cm (0.28 m) only the right one is within.
+  const MetricFrame a = Pixels(20e6, 9.0, 9.0, 0.30f);
+  MetricFrame b = Pixels(17e6, 9.0, 9.0, 0.30f);
+  CombineFramePair(a, b);
+  EXPECT_TRUE(b.flags[0].Has(Flag::kInconsistent));
+  const MetricFrame c = Pixels(20e6, 9.0, 9.0, 0.05f);
+  MetricFrame d = Pixels(17e6, 9.0, 9.0, 0.05f);
+  CombineFramePair(c, d);
+  EXPECT_FALSE(d.flags[0].Any(kRejectMask));
+  EXPECT_NEAR(d.radial_distance_m[0], 9.0, 1e-5);
+}
+
+TEST(FramePair, AmplitudePerMicrosecondThatChangesMeansMotion) {
+  // Pixel 0: the same surface (amplitude per µs equal); pixel 1: three times brighter in the
+  // second frame (a hand came in), over the default ratio 2, although the distances agree.
+  MetricFrame a = Pixels(20e6, 3.0, 3.0, 0.01f);
+  MetricFrame b = Pixels(17e6, 3.0, 3.0, 0.01f);
+  a.info.integration_time_us = b.info.integration_time_us = 2550.0;
+  b.amplitude[1] = 3000.0f;
+  CombineFramePair(a, b);
+  EXPECT_FALSE(b.flags[0].Any(kRejectMask));
+  EXPECT_TRUE(b.flags[1].Has(Flag::kInconsistent));
+  // HDR: 4x the exposure, 4x the amplitude is the same surface; 1.5x is within the ratio too.
+  MetricFrame shorter = Pixels(20e6, 3.0, 3.0, 0.01f, 10);
+  MetricFrame longer = Pixels(20e6, 3.0, 3.0, 0.01f, 40);
+  shorter.info.integration_time_us = 2550.0;
+  longer.info.integration_time_us = 10200.0;
+  longer.amplitude[0] = 4000.0f;
+  longer.amplitude[1] = 6000.0f;
+  CombineFramePair(shorter, longer);
+  EXPECT_FALSE(longer.flags[0].Any(kRejectMask));
+  EXPECT_FALSE(longer.flags[1].Any(kRejectMask));
+  // Different exposures without known times cannot be compared: not checked.
+  MetricFrame unknown = Pixels(20e6, 3.0, 3.0, 0.01f, 40);
+  unknown.amplitude[1] = 100000.0f;
+  CombineFramePair(Pixels(20e6, 3.0, 3.0, 0.01f, 10), unknown);
+  EXPECT_FALSE(unknown.flags[1].Any(kRejectMask));
+  // max_amplitude_ratio 0 turns the check off.
+  MetricFrame c = Pixels(20e6, 3.0, 3.0, 0.01f);
+  MetricFrame d = Pixels(17e6, 3.0, 3.0, 0.01f);
+  d.amplitude[1] = 3000.0f;
+  FramePairOptions off;
+  off.max_amplitude_ratio = 0.0;
+  CombineFramePair(c, d, off);
+  EXPECT_FALSE(d.flags[1].Any(kRejectMask));
+}
+
 TEST(FramePair, HdrTakesTheOtherExposureWhereOneClippedAndWeightsBySigma) {
   // Long exposure (previous): σ 1 cm; short exposure (current): σ 3 cm, 2 cm further off.
   // Weights 1/σ²: (3.00 / 1e-4 + 3.02 / 9e-4) / (1/1e-4 + 1/9e-4) = 3.002 m.
@@ -115,6 +165,11 @@ TEST(FramePair, BadInputIsAClearError) {
   FramePairOptions o;
   o.max_disagreement_sigma = 0;
   EXPECT_THROW(FramePairCombiner{o}, Error);
+  for (double bad : {0.5, -1.0, 2e6, std::nan("")}) {
+    FramePairOptions r;
+    r.max_amplitude_ratio = bad;
+    EXPECT_THROW(FramePairCombiner{r}, Error) << bad;
+  }
   WrapCheckOptions w;
   w.margin = 0;
   RayTable rays{Image<float>(2, 1, 0.0f), Image<float>(2, 1, 0.0f), Image<float>(2, 1, 1.0f)};

@@ -39,12 +39,37 @@ TEST(Uncertainty, EdgesAddHalfTheirJump) {
 }
 
 TEST(Uncertainty, RejectedPixelsAreInfiniteAndNotNeighbours) {
-  MetricFrame m = Row({1.0f, 5.0f, 1.0f}, 0.01f);
-  m.flags[1] = PixelFlags(Flag::kSaturated);
+  MetricFrame m = Row({1.0f, 5.0f, 1.0f, 1.0f}, 0.01f);
+  m.flags[1] = PixelFlags(Flag::kLowAmplitude);
   const Image<float> u = ComputeUncertainty(m);
   EXPECT_TRUE(std::isinf(u[1]));
-  EXPECT_NEAR(u[0], 0.01, 1e-7);  // the saturated neighbour is no edge evidence
+  EXPECT_NEAR(u[0], 0.01, 1e-7);  // a rejected neighbour is no edge evidence
   EXPECT_FALSE(UncertaintyFilter(m)[1].Any(kRejectMask));  // its own flag already says why
+}
+
+TEST(Uncertainty, NextToAClippedPixelTheJumpIsUnbounded) {
+  // Pixel 1 clipped: its distance is unknown, pixels 0 and 2 may mix with it (u = inf, flagged);
+  // pixel 3 is two away and keeps its noise. Without the flag in unknown_neighbour_flags, a
+  // clipped neighbour is merely unusable, as any rejected one. The same for kInconsistent.
+  MetricFrame m = Row({1.0f, 5.0f, 1.0f, 1.0f}, 0.01f);
+  m.flags[1] = PixelFlags(Flag::kSaturated);
+  UncertaintyOptions on;
+  on.unknown_neighbour_flags =
+      PixelFlags(Flag::kSaturated).bits() | PixelFlags(Flag::kInconsistent).bits();
+  const Image<float> u = ComputeUncertainty(m, on);
+  EXPECT_TRUE(std::isinf(u[0]));
+  EXPECT_TRUE(std::isinf(u[2]));
+  EXPECT_NEAR(u[3], 0.01, 1e-7);
+  const Image<PixelFlags> f = UncertaintyFilter(m, on);
+  EXPECT_TRUE(f[0].Has(Flag::kLowConfidence));
+  EXPECT_TRUE(f[2].Has(Flag::kLowConfidence));
+  EXPECT_FALSE(f[1].Any(kRejectMask));  // its own kSaturated says why
+  EXPECT_FALSE(f[3].Any(kRejectMask));
+  UncertaintyOptions off;
+  off.unknown_neighbour_flags = 0;
+  EXPECT_NEAR(ComputeUncertainty(m, off)[0], 0.01, 1e-7);
+  m.flags[1] = PixelFlags(Flag::kInconsistent);
+  EXPECT_TRUE(std::isinf(ComputeUncertainty(m, on)[0]));
 }
 
 TEST(Uncertainty, BadInputIsAClearError) {

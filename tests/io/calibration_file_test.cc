@@ -82,6 +82,14 @@ OffsetCalibration Sample() {
   sp.intensity_per_register = 189.5;
   sp.scene = "sim:pavilion";
   c.controller_setpoint = sp;
+  ScatteringCalibration sc;
+  sc.lobes = {{0.00048828125, 8.0}, {0.000732421875, 48.0}};
+  sc.frames = 8;
+  sc.integration_time_register = 12;
+  sc.target_pixels = 64;
+  sc.fit_pixels = 19000;
+  sc.explained_fraction = 0.015625;
+  c.scattering = sc;
   return c;
 }
 
@@ -138,6 +146,20 @@ void ExpectSame(const OffsetCalibration& a, const OffsetCalibration& b) {
     EXPECT_EQ(x.intensity_per_register, y.intensity_per_register);
     EXPECT_EQ(x.scene, y.scene);
   }
+  ASSERT_EQ(a.scattering.has_value(), b.scattering.has_value());
+  if (a.scattering) {
+    const ScatteringCalibration &x = *a.scattering, &y = *b.scattering;
+    ASSERT_EQ(x.lobes.size(), y.lobes.size());
+    for (std::size_t k = 0; k < x.lobes.size(); ++k) {
+      EXPECT_EQ(x.lobes[k].weight, y.lobes[k].weight);
+      EXPECT_EQ(x.lobes[k].sigma_px, y.lobes[k].sigma_px);
+    }
+    EXPECT_EQ(x.frames, y.frames);
+    EXPECT_EQ(x.integration_time_register, y.integration_time_register);
+    EXPECT_EQ(x.target_pixels, y.target_pixels);
+    EXPECT_EQ(x.fit_pixels, y.fit_pixels);
+    EXPECT_EQ(x.explained_fraction, y.explained_fraction);
+  }
 }
 
 TEST(CalibrationFileTest, RoundTripIsExact) {
@@ -151,6 +173,7 @@ TEST(CalibrationFileTest, RoundTripIsExact) {
   plain.distance_correction.reset();
   plain.noise.reset();
   plain.controller_setpoint.reset();
+  plain.scattering.reset();
   SaveCalibration(p, plain);
   ExpectSame(LoadCalibration(p), plain);
   // Written atomically: no temporary file left beside the target.
@@ -164,11 +187,12 @@ TEST(CalibrationFileTest, FileIsTheDocumentedYaml) {
   SaveCalibration(p, Sample());
   const std::string text = ReadFile(p);
   for (const char* key :
-       {"format: tofcam-calibration", "version: 2", "camera_model: \"SR-2\"", "width: 5",
+       {"format: tofcam-calibration", "version: 3", "camera_model: \"SR-2\"", "width: 5",
         "height: 3", "modulation_frequency_hz: 20000000", "uncalibrated_pixels: [[2, 4]]",
         "distance_correction:", "exposure_offset_m_per_ms: 0.0009765625",
         "noise:", "delta_l_scale: 0.1875", "controller_setpoint:", "bias_register: 151",
-        "scene: \"sim:pavilion\""}) {
+        "scene: \"sim:pavilion\"", "scattering:", "- {weight: 0.00048828125, sigma_px: 8}",
+        "integration_time_register: 12"}) {
     EXPECT_NE(text.find(key), std::string::npos) << key << "\n" << text;
   }
 }
@@ -217,11 +241,18 @@ void ExpectRejected(const std::string& from, const std::string& to, const std::s
 TEST(CalibrationFileTest, RejectsEveryMalformedField) {
   ExpectRejected("format: tofcam-calibration", "format: something-else", "format is");
   ExpectRejected("format: tofcam-calibration\n", "", "missing key 'format'");
-  ExpectRejected("version: 2", "version: 3", "unsupported version 3");
-  ExpectRejected("version: 2", "version: 0", "unsupported version 0");
-  ExpectRejected("version: 2", "version: one", "not an integer");
-  // Version 1 files cannot carry the version-2 keys (the Sample has all of them).
-  ExpectRejected("version: 2", "version: 1", "unknown key 'exposure_offset_m_per_ms'");
+  ExpectRejected("version: 3", "version: 4", "unsupported version 4");
+  ExpectRejected("version: 3", "version: 0", "unsupported version 0");
+  ExpectRejected("version: 3", "version: one", "not an integer");
+  // Older versions cannot carry the later keys (the Sample has all of them).
+  ExpectRejected("version: 3", "version: 1", "unknown key 'exposure_offset_m_per_ms'");
+  ExpectRejected("version: 3", "version: 2", "unknown key 'scattering'");
+  ExpectRejected("- {weight: 0.00048828125", "- {weight: 0.7", "weight");
+  ExpectRejected("- {weight: 0.00048828125", "- {weight: nan", "not finite");
+  ExpectRejected("sigma_px: 48}", "sigma_px: 0}", "sigma");
+  ExpectRejected("sigma_px: 48}", "sigma_px: 48, gain: 2}", "unknown key 'gain'");
+  ExpectRejected("explained_fraction: 0.015625", "explained_fraction: 2", "[0, 1]");
+  ExpectRejected("  target_pixels: 64\n", "", "missing key 'target_pixels'");
   ExpectRejected("exposure_offset_m_per_ms: 0.0009765625\n", "",
                  "missing key 'exposure_offset_m_per_ms'");
   ExpectRejected("exposure_offset_m_per_ms: 0.0009765625", "exposure_offset_m_per_ms: 0.5",
@@ -282,10 +313,11 @@ TEST(CalibrationFileTest, VersionOneFilesLoadWithoutExposureCompensation) {
   v1.exposure_offset_m_per_ms = 0.0;
   v1.noise.reset();
   v1.controller_setpoint.reset();
+  v1.scattering.reset();
   const fs::path p = Temp("v1.yaml");
   SaveCalibration(p, v1);
   std::string text = ReadFile(p);
-  for (const auto& [from, to] : {std::pair<std::string, std::string>{"version: 2", "version: 1"},
+  for (const auto& [from, to] : {std::pair<std::string, std::string>{"version: 3", "version: 1"},
                                  {"exposure_offset_m_per_ms: 0\n", ""}}) {
     const auto at = text.find(from);
     ASSERT_NE(at, std::string::npos) << from << "\n" << text;

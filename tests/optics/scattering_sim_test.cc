@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "halo_bias.h"
 #include "tofcam/optics/scattering.h"
 #include "tofcam/sim/simulated_camera.h"
 
@@ -43,31 +44,7 @@ sim::Scene CalibrationScene(bool card) {
   return sim::ParseScene(yaml, "scatter-calibration", ".");
 }
 
-// Median over the halo pixels (truth cause kScattering, nothing else wrong, hand not there) of
-// the per-pixel mean error against the truth, m.
-double MedianHaloBias(const std::vector<Frame>& frames) {
-  const Frame& f0 = frames.front();
-  const double range = UnambiguousRangeM(f0.info.modulation_frequency_hz);
-  std::vector<double> bias;
-  for (std::size_t i = 0; i < f0.distance.size(); ++i) {
-    const PixelFlags causes = f0.truth->causes[i];
-    if (!causes.Has(Flag::kScattering) || causes.Has(Flag::kMixed) ||
-        causes.Has(Flag::kSaturated) || causes.Has(Flag::kNoReturn) ||
-        f0.truth->radial_distance_m[i] < 1.0f) {
-      continue;
-    }
-    double sum = 0;
-    for (const Frame& f : frames) {
-      double e = f.distance[i] * range / 65536.0 - f.truth->radial_distance_m[i];
-      e -= range * std::round(e / range);
-      sum += e;
-    }
-    bias.push_back(sum / frames.size());
-  }
-  if (bias.empty()) return 0.0;
-  std::nth_element(bias.begin(), bias.begin() + bias.size() / 2, bias.end());
-  return bias[bias.size() / 2];
-}
+using testing::MedianHaloBias;
 
 TEST(ScatteringSim, EstimatedPsfShrinksTheHandHalo) {
   const ScatteringFit fit =

@@ -141,12 +141,13 @@ TEST(CompensateScattering, LeavesUnknownPixelsAlone) {
 }
 
 TEST(EstimateScatteringPsf, RecoversTheLobesFromACardScene) {
-  const std::vector<ScatteringLobe> lobes = {{0.012, 6.0}, {0.008, 32.0}};
+  // Widths on the default grid (third octaves): found exactly.
+  const std::vector<ScatteringLobe> lobes = {{0.012, 6.35}, {0.008, 32.0}};
   const Scene without = Scatter(CardScene(false), lobes), with = Scatter(CardScene(true), lobes);
   const std::vector<Frame> a = {Encode(without.z, without.dc)}, b = {Encode(with.z, with.dc)};
   const ScatteringFit fit = EstimateScatteringPsf(a, b);
   ASSERT_EQ(fit.psf.lobes.size(), 2u);
-  EXPECT_EQ(fit.psf.lobes[0].sigma_px, 6.0);
+  EXPECT_EQ(fit.psf.lobes[0].sigma_px, 6.35);
   EXPECT_EQ(fit.psf.lobes[1].sigma_px, 32.0);
   EXPECT_NEAR(fit.psf.lobes[0].weight, 0.012, 0.0012);
   EXPECT_NEAR(fit.psf.lobes[1].weight, 0.008, 0.0008);

@@ -21,6 +21,7 @@
 
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
+#include "tofcam/io/calibration_file.h"
 #include "tofcam/io/pipeline_config.h"
 #include "tofcam/sim/simulated_camera.h"
 
@@ -140,6 +141,101 @@ TEST(PipelineTest, AppliesEquationOneIncludingTheWrap) {
   const double x = r.cloud.x[0], y = r.cloud.y[0], z = r.cloud.z[0];
   EXPECT_NEAR(std::sqrt(x * x + y * y + z * z), r.frame.radial_distance_m[0], 1e-5);
   EXPECT_LT(x, 0.0);
+}
+
+// Dual-frequency runs alternate 20 and 17 MHz: eq. 1 depends on L, so each frequency needs the
+// offsets measured at it (hand-computed as in the test above).
+TEST(PipelineTest, AlternateFrequencyFramesGetTheirOwnCalibration) {
+  // The code of the error constructing a pipeline throws (kInternal when none is thrown).
+  const auto code_of = [](const PipelineOptions& o) {
+    try {
+      Pipeline p(o, TinyCamera());
+    } catch (const Error& e) {
+      return e.code();
+    }
+    return ErrorCode::kInternal;
+  };
+  PipelineOptions options;
+  options.calibration = TinyCalibration(0.10f, 0.05f);
+  options.controller_enabled = false;
+  options.alternate_modulation_frequency_hz = 17e6;
+  // Calibrated at 20 MHz only: every other frame would be uncalibrated, which is refused.
+  EXPECT_EQ(code_of(options), ErrorCode::kInvalidArgument);
+  OffsetCalibration alternate = TinyCalibration(0.20f, 0.30f);
+  alternate.modulation_frequency_hz = 17e6;
+  options.alternate_calibration = alternate;
+  Pipeline pipeline(options, TinyCamera());
+  Frame f = TinyFrame(20000, 30000);
+  const PipelineResult a = pipeline.Process(f);
+  EXPECT_NEAR(a.frame.radial_distance_m[0], 20000 * UnambiguousRangeM(20e6) / 65536 - 0.10, 2e-6);
+  EXPECT_DOUBLE_EQ(a.next_modulation_frequency_hz, 17e6);
+  f.info.modulation_frequency_hz = 17e6;
+  const PipelineResult b = pipeline.Process(f);
+  EXPECT_NEAR(b.frame.radial_distance_m[0], 20000 * UnambiguousRangeM(17e6) / 65536 - 0.20, 2e-6);
+  EXPECT_NEAR(b.frame.radial_distance_m[1], 30000 * UnambiguousRangeM(17e6) / 65536 - 0.30, 2e-6);
+  EXPECT_DOUBLE_EQ(b.next_modulation_frequency_hz, 20e6);
+  // A calibration made at a third frequency does not fit the alternate one.
+  alternate.modulation_frequency_hz = 15e6;
+  options.alternate_calibration = alternate;
+  EXPECT_EQ(code_of(options), ErrorCode::kMismatch);
+  // An alternate calibration without an alternate frequency is a configuration error.
+  options.alternate_modulation_frequency_hz = 0.0;
+  EXPECT_EQ(code_of(options), ErrorCode::kInvalidArgument);
+  // Without any calibration both frequencies are converted raw.
+  PipelineOptions raw;
+  raw.controller_enabled = false;
+  raw.alternate_modulation_frequency_hz = 17e6;
+  Pipeline uncalibrated(raw, TinyCamera());
+  EXPECT_NEAR(uncalibrated.Process(f).frame.radial_distance_m[0],
+              20000 * UnambiguousRangeM(17e6) / 65536, 2e-6);
+}
+
+// HDR alternates the controller's register and one `ratio` times as long (time = register x
+// 255 µs on this camera, so register 10 -> 40 at ratio 4; 80 -> 320 is clamped to the largest
+// register that keeps the camera's frame rate), and merges each frame with the one before.
+TEST(PipelineTest, HdrAlternatesTheBaseAndTheLongExposure) {
+  PipelineOptions options;
+  options.controller.kind = ControllerKind::kFixed;
+  options.controller.bias_register = 10;
+  options.frame_pair_enabled = true;
+  options.hdr_exposure_ratio = 4.0;
+  Pipeline pipeline(options, TinyCamera());
+  ASSERT_EQ(pipeline.InitialIntegrationRegister(), 10);
+  Frame f = TinyFrame(20000, 30000);
+  std::vector<int> registers;
+  std::vector<bool> combined;
+  int reg = 10;
+  for (int k = 0; k < 4; ++k) {
+    f.info.integration_time_register = reg;
+    f.info.integration_time_us = reg * 255.0;
+    const PipelineResult r = pipeline.Process(f);
+    registers.push_back(r.next_integration_register);
+    combined.push_back(r.combined);
+    reg = r.next_integration_register;
+  }
+  EXPECT_EQ(registers, (std::vector<int>{40, 10, 40, 10}));
+  // The first frame has no partner; every later one differs from the one before in exposure.
+  EXPECT_EQ(combined, (std::vector<bool>{false, true, true, true}));
+  pipeline.SetControllerRegister(80);
+  pipeline.ResetController(80);
+  f.info.integration_time_register = 80;
+  f.info.integration_time_us = 80 * 255.0;
+  const CameraInfo camera = TinyCamera();
+  EXPECT_EQ(pipeline.Process(f).next_integration_register,
+            std::min(255, MaxRegisterForFrameRate(camera, camera.max_frame_rate_hz)));
+
+  // HDR and two frequencies both pair consecutive frames; HDR needs the merge.
+  PipelineOptions both = options;
+  both.alternate_modulation_frequency_hz = 17e6;
+  EXPECT_THROW(Pipeline(both, TinyCamera()), Error);
+  PipelineOptions no_merge = options;
+  no_merge.frame_pair_enabled = false;
+  EXPECT_THROW(Pipeline(no_merge, TinyCamera()), Error);
+  for (double bad : {1.0, 100.0, -2.0}) {
+    PipelineOptions o = options;
+    o.hdr_exposure_ratio = bad;
+    EXPECT_THROW(Pipeline(o, TinyCamera()), Error) << bad;
+  }
 }
 
 TEST(PipelineTest, AccuracyThresholdFlagsExactlyThePixelsAboveIt) {
@@ -604,6 +700,35 @@ TEST_F(RunCommandTest, CtrlCFinishesTheFrameWritesOutputsAndExitsZero) {
   EXPECT_EQ(summary.at("frames").get<std::size_t>(), rows.size());
   EXPECT_GE(rows.size(), 3u);
   EXPECT_LT(rows.size(), 1000000u);
+}
+
+// The scattering calibration through the CLI: the wall and the card scene shipped with the
+// simulator give a point-spread in the calibration file, which `tofcam run` then uses.
+TEST_F(RunCommandTest, CalibrateScatteringAndRunWithIt) {
+  const fs::path cal = dir_ / "cal.yaml";
+  std::string text;
+  ASSERT_EQ(Run("calibrate --camera 'sim:wall?distance_m=3' --scattering-target "
+                "sim:calibration/scattering-card --scattering-frames 4 --out " +
+                    cal.string(),
+                &text),
+            0)
+      << Stderr();
+  EXPECT_NE(text.find("scattering point-spread"), std::string::npos) << text;
+  const OffsetCalibration c = LoadCalibration(cal);
+  ASSERT_TRUE(c.scattering.has_value());
+  EXPECT_EQ(c.scattering->frames, 4);
+  EXPECT_FALSE(c.scattering->lobes.empty());
+  ASSERT_EQ(Run("run --camera sim:hand --frames 2 --calibration " + cal.string() + " --out " +
+                (dir_ / "run").string()),
+            0)
+      << Stderr();
+  EXPECT_NE(Stderr().find("scattering compensation on"), std::string::npos) << Stderr();
+  // Bad values are named before any frame is taken.
+  EXPECT_EQ(Run("calibrate --camera 'sim:wall?distance_m=3' --scattering-target "
+                "sim:calibration/scattering-card --scattering-frames 0 --out " +
+                (dir_ / "x.yaml").string()),
+            ExitStatus(ErrorCode::kInvalidArgument));
+  EXPECT_NE(Stderr().find("--scattering-frames"), std::string::npos) << Stderr();
 }
 
 TEST_F(RunCommandTest, PrintConfigIsALoadableConfig) {

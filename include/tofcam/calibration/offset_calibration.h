@@ -25,6 +25,7 @@
 #include "tofcam/accuracy/delta_l.h"
 #include "tofcam/control/integration_time_controller.h"
 #include "tofcam/core/frame.h"
+#include "tofcam/optics/scattering.h"
 
 namespace tofcam {
 
@@ -99,11 +100,27 @@ struct NoiseCalibration {
   void Validate() const;
 };
 
+/// The camera's scattering point-spread, measured by CalibrateScattering (`tofcam calibrate
+/// --scattering-target`, docs/beyond.md) on a wall without and with a bright card near the lens.
+struct ScatteringCalibration {
+  /// The fitted lobes (one or two; weights [0, 0.5) summing below 0.5, σ in (0, 1000] px).
+  std::vector<ScatteringLobe> lobes;
+  int frames = 0;                     ///< Frames averaged per scene, >= 1.
+  int integration_time_register = 0;  ///< Register both scenes were shot at, >= 0.
+  int target_pixels = 0;              ///< Pixels of the card, >= 0.
+  int fit_pixels = 0;                 ///< Background pixels the fit used, >= 0.
+  double explained_fraction = 0.0;    ///< EstimateScatteringPsf's, [0, 1].
+
+  /// Throws Error(kInvalidArgument) naming the field.
+  void Validate() const;
+};
+
 /// A per-pixel calibration of one camera at one modulation frequency.
 struct OffsetCalibration {
   /// Current file-format version. 2 added exposure_offset_m_per_ms, noise and
   /// controller_setpoint; version-1 files load with s = 0 (no exposure compensation) and neither.
-  static constexpr int kVersion = 2;
+  /// 3 added the scattering point-spread (optional).
+  static constexpr int kVersion = 3;
 
   int version = kVersion;
   std::string camera_model;               ///< Must match CameraInfo::model.
@@ -127,6 +144,8 @@ struct OffsetCalibration {
   /// Integration-time controller set point chosen from an integration-time sweep of the scene
   /// the camera works in (ChooseSetpoint); absent when not measured.
   std::optional<ControllerSetpoint> controller_setpoint;
+  /// Scattering point-spread of the camera's optics; absent when not measured.
+  std::optional<ScatteringCalibration> scattering;
   /// o[i][j]: measured minus true radial distance, m, in (-L/2, L/2); width x height.
   Image<float> offset_m;
   /// Bits OR-ed into every corrected frame: kInvalid where a pixel could not be calibrated

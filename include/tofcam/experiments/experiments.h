@@ -61,7 +61,8 @@ struct ExperimentResult {
 };
 
 /// "fig2", "fig3", "fig5", "fig6-7", "fig8-9", "fig10-11", "mirror", "calibration",
-/// "controllers", "filters", "real-data", in that order.
+/// "controllers", "filters", "real-data", "beyond" (issue 18: the methods beyond the paper), in
+/// that order.
 [[nodiscard]] std::vector<std::string> ExperimentNames();
 
 /// Runs one experiment. Throws Error(kNotFound) listing the names for an unknown name,

@@ -11,7 +11,9 @@
 /// Either way, a pixel whose two distances disagree by more than `max_disagreement_sigma`
 /// combined standard deviations (motion between the frames, multipath that differs between
 /// frequencies, a wrong wrap count) is flagged kInconsistent, and the pixel's ΔL becomes the
-/// combined σ.
+/// combined σ. So is a pixel whose amplitude per µs changed by more than `max_amplitude_ratio`
+/// (it saw two surfaces) and, with two frequencies, one for which a second pair of wrap counts
+/// also agrees within the tolerance (noise too large to tell the pairs apart: ambiguous).
 ///
 /// Single-frequency wrap detection (WrapCheckFilter) is the fallback where only one frequency
 /// exists.
@@ -33,6 +35,13 @@ struct FramePairOptions {
   /// Absolute floor of that tolerance, m, [0, 10]: registers quantise and ΔL can be tiny on
   /// bright pixels.
   double min_tolerance_m = 0.01;
+  /// Largest ratio of the two frames' amplitudes per µs of integration time, [1, 1e6]; 0 = no
+  /// check. One surface returns the same amplitude per µs in both frames (at either frequency,
+  /// within the demodulation contrast's few %); a larger ratio means the pixel saw two surfaces
+  /// (something moved between the frames), whose distances no wrap count or average can
+  /// reconcile: kInconsistent. Frames of different exposure without a known
+  /// FrameInfo::integration_time_us are not checked.
+  double max_amplitude_ratio = 2.0;
 
   void Validate() const;
 };

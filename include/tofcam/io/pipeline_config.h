@@ -44,7 +44,8 @@ namespace tofcam {
 
 /// Loads `options.calibration_file` into `options.calibration` when a file is named and no
 /// calibration is loaded yet (LoadCalibration's errors), then checks it fits `camera`
-/// (CheckCalibrationMatches: Error(kMismatch) naming the field).
+/// (CheckCalibrationMatches: Error(kMismatch) naming the field). The same for
+/// `alternate_calibration_file`, checked against the camera at the alternate frequency.
 void LoadPipelineCalibration(PipelineOptions& options, const CameraInfo& camera);
 
 }  // namespace tofcam
@@ -55,6 +56,7 @@ namespace tofcam {
 struct MeasuredDefaults {
   std::string delta_l_scale;  ///< e.g. "the calibration file's noise calibration (30 ...)".
   std::string controller;     ///< I_A, V_p and c_0.
+  std::string scattering;     ///< The scattering compensation's point-spread.
 };
 
 /// Fills the camera-specific options the configuration left at their defaults from what was
@@ -63,7 +65,9 @@ struct MeasuredDefaults {
 ///    (what the camera source knows, e.g. an importer's fit or a simulator's ground-truth σ;
 ///    `source_note` says where it came from), else the default 1 (eq. 2 as printed);
 ///  - controller.target_intensity / gain_register_per_intensity / bias_register: the loaded
-///    calibration's controller set point (the kind is left alone).
+///    calibration's controller set point (the kind is left alone);
+///  - scattering: the loaded calibration's point-spread turns the compensation on with its
+///    lobes, unless the configuration gives any `scattering.*` key.
 /// Keys in `given_keys` (from ParsePipelineConfig) are never changed. Call after
 /// LoadPipelineCalibration. Throws Error(kInvalidArgument) if the result does not validate.
 [[nodiscard]] MeasuredDefaults ApplyMeasuredDefaults(

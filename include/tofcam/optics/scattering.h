@@ -53,8 +53,10 @@ void CompensateScatteringInto(const Frame& frame, const ScatteringOptions& optio
                                                     std::span<const ScatteringLobe> lobes);
 
 struct ScatteringFitOptions {
-  /// Candidate lobe widths, pixels (each in (0, 1000]); every pair (or single) is tried.
-  std::vector<double> sigma_grid_px = {2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64};
+  /// Candidate lobe widths, pixels (each in (0, 1000]); every pair (or single) is tried. The
+  /// default: third octaves from 2 to 64 px (2^(1 + k/3), steps of 26 %).
+  std::vector<double> sigma_grid_px = {2,    2.52, 3.17, 4,    5.04, 6.35, 8,    10.1,
+                                       12.7, 16,   20.2, 25.4, 32,   40.3, 50.8, 64};
   /// A pixel belongs to the bright target when its amplitude with the target is at least this
   /// many times its amplitude without, (1, 1e6].
   double target_amplitude_ratio = 4.0;

@@ -82,12 +82,29 @@ struct PipelineOptions {
   /// combined with the one before when their modulation frequencies differ, after the
   /// per-pixel filters. With `alternate_modulation_frequency_hz` > 0 the result asks for the
   /// camera's frequency and that one in turn (PipelineResult::next_modulation_frequency_hz).
-  /// Needs ΔL (accuracy.enabled). Off by default. A calibration is made at one frequency: frames
-  /// at the other are not calibrated (eq. 1 needs its own L), so use it without one or accept
-  /// the uncalibrated offsets.
+  /// Needs ΔL (accuracy.enabled). Off by default. A calibration is made at one frequency (eq. 1
+  /// and the distance correction depend on L): frames at the alternate frequency get
+  /// `alternate_calibration`. A calibrated pipeline that alternates needs it (the Pipeline
+  /// refuses to leave every other frame uncalibrated); without any calibration both are raw.
   bool frame_pair_enabled = false;
   FramePairOptions frame_pair;
   double alternate_modulation_frequency_hz = 0.0;  ///< Hz, 0 = none; else > 0 and finite.
+  /// HDR (two exposures, not in the paper): with a ratio > 0, every other frame is exposed that
+  /// many times longer than the controller's register (as long as the camera's frame rate and
+  /// the controller's bounds allow) and each frame is merged with the one before
+  /// (FramePairCombiner: a pixel one exposure rejects, e.g. clipped or too dark, takes the
+  /// other's value; both good are averaged by 1/ΔL²; a disagreement beyond
+  /// frame_pair.max_disagreement_sigma, e.g. motion, is kInconsistent). The controller judges
+  /// only the base exposures, before the merge and the neighbourhood filters. 0 = off; else in
+  /// [1.5, 64]. Needs frame_pair_enabled and no alternate frequency.
+  double hdr_exposure_ratio = 0.0;
+  /// Calibration file made at `alternate_modulation_frequency_hz`, "" = none; loaded into
+  /// `alternate_calibration` by LoadPipelineCalibration() like `calibration_file`.
+  std::string alternate_calibration_file;
+  /// Calibration made at `alternate_modulation_frequency_hz` (same camera model and size);
+  /// unset = frames at that frequency are not calibrated. Must be unset without an alternate
+  /// frequency.
+  std::optional<OffsetCalibration> alternate_calibration;
 
   /// Run the integration-time controller. Off: next_integration_register repeats the frame's.
   bool controller_enabled = true;
@@ -182,17 +199,23 @@ class Pipeline {
  private:
   [[nodiscard]] Image<Rgb8> Render(const PipelineResult& result,
                                    const Image<PixelFlags>& flags) const;
+  // HDR: the register of the long exposure that follows a base exposure at `base_register`.
+  [[nodiscard]] int LongExposureRegister(int base_register) const;
 
   PipelineOptions options_;
   CameraInfo camera_;
   RayTable rays_;
-  std::optional<DenseDistanceCorrection> table_;  // the calibration's, resampled once
+  std::optional<DenseDistanceCorrection> table_;            // the calibration's, resampled once
+  std::optional<DenseDistanceCorrection> alternate_table_;  // the alternate calibration's
   std::unique_ptr<IntegrationTimeController> controller_;
   std::optional<TemporalFilter> temporal_;
   Image<float> smoothed_;
-  Frame compensated_;                      // the scattering compensation's output, reused per frame
-  std::optional<FramePairCombiner> pair_;  // the smoothing's
-                                           // output, swapped with the frame's distances
+  Frame compensated_;  // the scattering compensation's output, reused per frame
+  std::optional<FramePairCombiner> pair_;
+  // HDR: the register the controller chose at the last base exposure, and whether the frame
+  // being processed is the long one.
+  int hdr_base_register_ = 0;
+  bool hdr_long_ = false;
 };
 
 }  // namespace tofcam

@@ -108,7 +108,8 @@ using SceneOverrides = std::map<std::string, std::string>;
 [[nodiscard]] std::vector<std::string> BuiltinSceneNames();
 /// A built-in scene by name; Error(kNotFound) listing the names when unknown.
 [[nodiscard]] Scene LoadBuiltinScene(const std::string& name, const SceneOverrides& overrides = {});
-/// A built-in scene name or a path to a YAML file.
+/// A built-in scene name, an embedded scene in a folder (e.g. "calibration/scattering-card",
+/// not part of BuiltinSceneNames()) or a path to a YAML file.
 [[nodiscard]] Scene ResolveScene(const std::string& name_or_path,
                                  const SceneOverrides& overrides = {});
 /// Parses "name?key=value&key=value" into the name and overrides (kInvalidArgument when
