@@ -10,6 +10,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev clang-format clang-tidy
   python3-dev python3-numpy python3-matplotlib python3-pytest pybind11-dev
+  libcpp-httplib-dev libjs-three chromium python3-websocket
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -1,0 +1,856 @@
+#include "viewer_server.h"
+
+#include <httplib.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <ctime>
+#include <deque>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "tofcam/color/false_color.h"
+#include "tofcam/core/error.h"
+#include "tofcam/io/cloud_io.h"
+#include "tofcam/io/recording.h"
+#include "web_assets.h"
+
+namespace tofcam::viewer {
+namespace {
+
+using json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+constexpr std::uint32_t kMagic = 0x56464f54;  // "TOFV" little-endian
+constexpr std::uint32_t kFormatVersion = 1;
+
+std::string ReadWholeFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return {};
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+double CpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+json Finite(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+// What the page may change; the HTTP threads validate into a copy and commit it whole, the loop
+// applies it before its next frame.
+struct Desired {
+  PipelineOptions pipeline;
+  std::uint64_t pipeline_version = 0;
+  bool paused = false;
+  int step = 0;  // frames to run while paused
+  std::optional<double> pan_rad;
+  int record = 0;                  // +1 start, -1 stop
+  std::unique_ptr<Camera> camera;  // a reopened source (new scene parameters)
+  std::string camera_spec;
+};
+
+// Type-checked readers for one control value; they throw std::string (the 400 reason).
+double Number(const json& v, const std::string& key, double lo, double hi, bool lo_open = false) {
+  if (!v.is_number()) throw std::string("control '" + key + "' must be a number");
+  const double x = v.get<double>();
+  if (!std::isfinite(x) || (lo_open ? !(x > lo) : !(x >= lo)) || !(x <= hi)) {
+    std::ostringstream msg;
+    msg << "control '" << key << "' = " << x << " is outside " << (lo_open ? "(" : "[") << lo
+        << ", " << hi << "]";
+    throw msg.str();
+  }
+  return x;
+}
+
+int Integer(const json& v, const std::string& key, int lo, int hi) {
+  if (!v.is_number_integer()) throw std::string("control '" + key + "' must be an integer");
+  const long long x = v.get<long long>();
+  if (x < lo || x > hi) {
+    throw "control '" + key + "' = " + std::to_string(x) + " is outside [" + std::to_string(lo) +
+        ", " + std::to_string(hi) + "]";
+  }
+  return static_cast<int>(x);
+}
+
+bool Bool(const json& v, const std::string& key) {
+  if (!v.is_boolean()) throw std::string("control '" + key + "' must be true or false");
+  return v.get<bool>();
+}
+
+// The scene spec with its query parameters replaced by `params` (merged).
+std::string WithSceneParameters(const std::string& spec, const json& params) {
+  const auto q = spec.find('?');
+  std::map<std::string, std::string> query;
+  if (q != std::string::npos) {
+    std::stringstream rest(spec.substr(q + 1));
+    std::string item;
+    while (std::getline(rest, item, '&')) {
+      const auto eq = item.find('=');
+      if (eq != std::string::npos) query[item.substr(0, eq)] = item.substr(eq + 1);
+    }
+  }
+  for (const auto& [key, value] : params.items()) {
+    if (key.empty() || key.size() > 64 ||
+        key.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_") != std::string::npos) {
+      throw std::string("scene parameter names are lower-case words, got '" + key + "'");
+    }
+    std::string text;
+    if (value.is_number()) {
+      const double x = value.get<double>();
+      if (!std::isfinite(x)) throw std::string("scene parameter '" + key + "' must be finite");
+      std::ostringstream s;
+      s.precision(9);
+      s << x;
+      text = s.str();
+    } else if (value.is_string() && value.get<std::string>().size() <= 64 &&
+               value.get<std::string>().find_first_of("&?=") == std::string::npos) {
+      text = value.get<std::string>();
+    } else {
+      throw std::string("scene parameter '" + key + "' must be a number or a short string");
+    }
+    query[key] = text;
+  }
+  std::string out = spec.substr(0, q);
+  char sep = '?';
+  for (const auto& [key, value] : query) {
+    out += sep + key + "=" + value;
+    sep = '&';
+  }
+  return out;
+}
+
+void Append(std::string& out, const void* data, std::size_t bytes) {
+  out.append(static_cast<const char*>(data), bytes);
+}
+
+}  // namespace
+
+void ViewerOptions::Validate() const {
+  if (port < 0 || port > 65535) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--port " + std::to_string(port) + " must be in [0, 65535] (0 = any free port)");
+  }
+  if (bind_address.empty()) throw Error(ErrorCode::kInvalidArgument, "--bind must not be empty");
+  if (max_body_bytes < 1024) {
+    throw Error(ErrorCode::kInvalidArgument, "max_body_bytes must be >= 1024");
+  }
+  if (max_frames < 0) throw Error(ErrorCode::kInvalidArgument, "--frames must be >= 0");
+}
+
+struct ViewerServer::Impl {
+  ViewerOptions options;
+  CameraOpener opener;
+  std::unique_ptr<Camera> camera;
+  CameraInfo info;
+  bool pan_supported = false;
+  std::string three_js, orbit_js;
+
+  // Control state (HTTP threads write, the loop reads).
+  mutable std::mutex control_mutex;
+  Desired desired;
+
+  // The latest frame (the loop writes, HTTP threads read).
+  mutable std::mutex frame_mutex;
+  std::condition_variable frame_cv;
+  std::shared_ptr<const std::string> latest;
+  long long latest_seq = 0;
+  PointCloud latest_cloud;
+  // /cloud.ply asks the loop for the last frame's cloud (copied only then: 8 MB per VGA frame).
+  long long cloud_requested = 0, cloud_served = 0;
+  ViewerStatus status;
+  std::map<std::string, long long> dropped_by_client;
+
+  std::atomic<bool> stopping{false};
+  std::atomic<bool> finished{false};
+  std::mutex done_mutex;
+  std::condition_variable done_cv;
+
+  httplib::Server server;
+  int port = 0;
+  std::thread http_thread, loop_thread;
+
+  std::string MetaJson() const;
+  std::string RaysBinary(const Pipeline& pipeline) const;
+  std::string rays;  // built once by the constructor
+  std::string Control(const std::string& body);
+  void Loop();
+  void Routes();
+  bool HostAllowed(const httplib::Request& req) const;
+};
+
+bool ViewerServer::Impl::HostAllowed(const httplib::Request& req) const {
+  const std::string host = req.get_header_value("Host");
+  const std::string p = ":" + std::to_string(port);
+  const bool loopback = options.bind_address == "127.0.0.1" ||
+                        options.bind_address == "localhost" || options.bind_address == "::1";
+  bool ok;
+  if (loopback) {
+    ok = host == "127.0.0.1" + p || host == "localhost" + p || host == "[::1]" + p ||
+         host == options.bind_address + p;
+  } else {
+    ok = !host.empty();  // bound elsewhere on purpose: any name of this machine
+  }
+  const std::string origin = req.get_header_value("Origin");
+  // A page of another origin (DNS rebinding, a foreign site) must not steer the camera.
+  if (!origin.empty() && origin != "http://" + host) ok = false;
+  return ok;
+}
+
+std::string ViewerServer::Impl::MetaJson() const {
+  json m;
+  m["camera"] = options.camera_spec;
+  m["model"] = info.model;
+  m["width"] = info.width();
+  m["height"] = info.height();
+  m["range_m"] = info.unambiguous_range_m();
+  m["has_truth"] = info.has_ground_truth;
+  m["has_intensity"] = info.has_intensity;
+  m["pan_supported"] = pan_supported;
+  m["scene_parameters_supported"] = options.camera_spec.rfind("sim:", 0) == 0;
+  m["min_register"] = info.min_integration_register;
+  m["max_register"] = info.max_integration_register;
+  m["three_js"] = !three_js.empty();
+  // The false-colour law (tofcam/color/false_color.h) for the legend, 64 steps over [0, L].
+  json legend = json::array();
+  const double far = info.unambiguous_range_m();
+  for (int k = 0; k < 64; ++k) {
+    const Rgb8 c = FalseColorOfDistance(far * k / 63.0, 0.0, far);
+    legend.push_back({c.r, c.g, c.b});
+  }
+  m["legend"] = legend;
+  m["reject_mask"] = kRejectMask;
+  json flags = json::array();
+  for (Flag f : kAllFlags) {
+    flags.push_back({{"bit", static_cast<unsigned>(f)}, {"name", std::string(FlagName(f))}});
+  }
+  m["flags"] = flags;
+  std::lock_guard<std::mutex> lock(control_mutex);
+  const PipelineOptions& p = desired.pipeline;
+  m["controller"] =
+      p.controller_enabled ? std::string(ControllerKindName(p.controller.kind)) : "none";
+  m["target_intensity"] = p.controller.target_intensity;
+  m["gain_register_per_intensity"] = p.controller.gain_register_per_intensity;
+  m["bias_register"] = p.controller.bias_register;
+  m["filters"] = {{"saturation", p.filters.saturation_enabled},
+                  {"accuracy", p.filters.accuracy_enabled},
+                  {"amplitude", p.filters.amplitude_enabled},
+                  {"jump_edge", p.filters.jump_edge_enabled},
+                  {"flying_pixel", p.filters.flying_pixel_enabled},
+                  {"weingarten", p.filters.weingarten_enabled},
+                  {"uncertainty", p.uncertainty_enabled}};
+  m["max_delta_l_m"] = p.filters.accuracy.max_delta_l_m;
+  m["min_amplitude"] = p.filters.amplitude.min_amplitude;
+  m["max_uncertainty_m"] = p.uncertainty.max_uncertainty_m;
+  return m.dump();
+}
+
+std::string ViewerServer::Impl::RaysBinary(const Pipeline& pipeline) const {
+  const RayTable& r = pipeline.rays();
+  std::string out;
+  for (const Image<float>* c : {&r.x, &r.y, &r.z}) Append(out, c->data(), c->size() * 4);
+  return out;
+}
+
+std::string ViewerServer::Impl::Control(const std::string& body) {
+  json j;
+  try {
+    j = json::parse(body);
+  } catch (const json::exception&) {
+    return "the body is not valid JSON";
+  }
+  if (!j.is_object()) return "the body must be a JSON object of controls";
+  std::unique_lock<std::mutex> lock(control_mutex);
+  PipelineOptions p = desired.pipeline;
+  bool paused = desired.paused;
+  int step = desired.step;
+  std::optional<double> pan = desired.pan_rad;
+  int record = desired.record;
+  std::string spec = desired.camera_spec;
+  bool reopen = false;
+  try {
+    for (const auto& [key, v] : j.items()) {
+      if (key == "paused") {
+        paused = Bool(v, key);
+      } else if (key == "step") {
+        step += Integer(v, key, 1, 1000);
+      } else if (key == "controller") {
+        if (!v.is_string()) throw std::string("control 'controller' must be a string");
+        if (v.get<std::string>() == "none") {
+          p.controller_enabled = false;
+        } else {
+          try {
+            p.controller.kind = ParseControllerKind(v.get<std::string>());
+          } catch (const Error& e) {
+            throw std::string(e.what());
+          }
+          p.controller_enabled = true;
+        }
+      } else if (key == "target_intensity") {
+        p.controller.target_intensity = Number(v, key, 0.0, 65532.0, true);
+      } else if (key == "gain_register_per_intensity") {
+        p.controller.gain_register_per_intensity = Number(v, key, 0.0, 1.0);
+      } else if (key == "bias_register") {
+        p.controller.bias_register = Integer(v, key, 1, 65535);
+      } else if (key == "fixed_register") {
+        const int lo = std::max(1, info.min_integration_register);
+        if (info.max_integration_register < lo) {
+          throw std::string("this source's integration time cannot be set");
+        }
+        p.controller_enabled = true;
+        p.controller.kind = ControllerKind::kFixed;
+        p.controller.bias_register = Integer(v, key, lo, info.max_integration_register);
+      } else if (key == "filters") {
+        if (!v.is_object()) throw std::string("control 'filters' must be an object");
+        for (const auto& [name, on] : v.items()) {
+          const bool b = Bool(on, "filters." + name);
+          if (name == "saturation") {
+            p.filters.saturation_enabled = b;
+          } else if (name == "accuracy") {
+            p.filters.accuracy_enabled = b;
+            if (b) p.accuracy_enabled = true;
+          } else if (name == "amplitude") {
+            p.filters.amplitude_enabled = b;
+          } else if (name == "jump_edge") {
+            p.filters.jump_edge_enabled = b;
+          } else if (name == "flying_pixel") {
+            p.filters.flying_pixel_enabled = b;
+          } else if (name == "weingarten") {
+            p.filters.weingarten_enabled = b;
+          } else if (name == "uncertainty") {
+            p.uncertainty_enabled = b;
+            if (b) p.accuracy_enabled = true;
+          } else {
+            throw std::string("unknown filter '" + name + "'");
+          }
+        }
+      } else if (key == "max_delta_l_m") {
+        p.filters.accuracy.max_delta_l_m = Number(v, key, 0.0, 100.0, true);
+      } else if (key == "min_amplitude") {
+        p.filters.amplitude.min_amplitude = Number(v, key, 0.0, 65532.0);
+      } else if (key == "max_uncertainty_m") {
+        p.uncertainty.max_uncertainty_m = Number(v, key, 0.0, 100.0, true);
+      } else if (key == "pan_deg") {
+        if (!pan_supported) throw std::string("this source has no pan unit");
+        pan = Number(v, key, -180.0, 180.0) * M_PI / 180.0;
+      } else if (key == "scene") {
+        if (options.camera_spec.rfind("sim:", 0) != 0) {
+          throw std::string("scene parameters need a simulated source (sim:...)");
+        }
+        if (!v.is_object() || v.size() > 16) {
+          throw std::string("control 'scene' must be an object of at most 16 parameters");
+        }
+        spec = WithSceneParameters(spec, v);
+        reopen = true;
+      } else if (key == "record") {
+        if (!v.is_string() || (v != "start" && v != "stop")) {
+          throw std::string("control 'record' must be \"start\" or \"stop\"");
+        }
+        record = v == "start" ? 1 : -1;
+      } else {
+        throw std::string("unknown control '" + key + "'");
+      }
+    }
+    try {
+      p.Validate();
+    } catch (const Error& e) {
+      throw std::string(e.what());
+    }
+  } catch (const std::string& reason) {
+    return reason;
+  }
+  std::unique_ptr<Camera> reopened;
+  if (reopen) {
+    // Opening a simulator takes a moment: not under the lock the loop takes every frame.
+    lock.unlock();
+    try {
+      reopened = opener(spec);
+    } catch (const Error& e) {
+      return std::string("scene: ") + e.what();
+    }
+    const CameraInfo& i = reopened->Info();
+    if (i.width() != info.width() || i.height() != info.height()) {
+      return "scene: the reopened camera has another size";
+    }
+    lock.lock();
+  }
+  // Any pipeline key rebuilds the pipeline at the next frame (the controller continues from the
+  // current register); pause, step, pan and recording do not.
+  const bool changed = std::any_of(j.items().begin(), j.items().end(), [](const auto& item) {
+    const std::string& k = item.key();
+    return k != "paused" && k != "step" && k != "pan_deg" && k != "record" && k != "scene";
+  });
+  desired.pipeline = std::move(p);
+  if (changed) ++desired.pipeline_version;
+  desired.paused = paused;
+  desired.step = step;
+  desired.pan_rad = pan;
+  desired.record = record;
+  if (reopen) {
+    desired.camera = std::move(reopened);
+    desired.camera_spec = spec;
+  }
+  return "";
+}
+
+void ViewerServer::Impl::Loop() {
+  std::uint64_t applied_version = 0;
+  std::optional<Pipeline> pipeline;
+  std::unique_ptr<RecordingWriter> recorder;
+  std::string recording_path;
+  PipelineResult result;
+  std::deque<Clock::time_point> times;
+  const double cpu_start = CpuSeconds();
+  long long frames = 0;
+  int reg = 0;
+  while (!stopping) {
+    bool paused = false, step = false;
+    std::optional<double> pan;
+    int record = 0;
+    std::unique_ptr<Camera> reopened;
+    {
+      std::lock_guard<std::mutex> lock(control_mutex);
+      if (!pipeline || desired.pipeline_version != applied_version) {
+        PipelineOptions p = desired.pipeline;
+        p.color_legend = false;  // the page draws its own legend
+        pipeline.emplace(std::move(p), info);
+        applied_version = desired.pipeline_version;
+        if (reg == 0) reg = pipeline->InitialIntegrationRegister();
+        if (pipeline->options().controller_enabled &&
+            pipeline->options().controller.kind == ControllerKind::kFixed) {
+          reg = pipeline->InitialIntegrationRegister();
+        }
+        pipeline->ResetController(reg);
+      }
+      paused = desired.paused;
+      if (paused && desired.step > 0) {
+        step = true;
+        --desired.step;
+      }
+      pan = desired.pan_rad;
+      desired.pan_rad.reset();
+      record = desired.record;
+      desired.record = 0;
+      reopened = std::move(desired.camera);
+    }
+    if (reopened) camera = std::move(reopened);
+    if (pan) {
+      try {
+        camera->SetPanAngleRad(*pan);
+      } catch (const Error& e) {
+        std::lock_guard<std::mutex> lock(frame_mutex);
+        status.last_error = e.what();
+      }
+    }
+    if (record > 0 && !recorder) {
+      try {
+        std::filesystem::create_directories(options.record_dir);
+        recording_path =
+            (options.record_dir / ("view_" + std::to_string(std::time(nullptr)) + ".h5")).string();
+        recorder = std::make_unique<RecordingWriter>(recording_path, info);
+      } catch (const std::exception& e) {
+        std::lock_guard<std::mutex> lock(frame_mutex);
+        status.last_error = std::string("recording: ") + e.what();
+        recording_path.clear();
+      }
+    } else if (record < 0 && recorder) {
+      try {
+        recorder->Close();
+      } catch (const Error& e) {
+        std::lock_guard<std::mutex> lock(frame_mutex);
+        status.last_error = std::string("recording: ") + e.what();
+      }
+      recorder.reset();
+      recording_path.clear();
+    }
+    {
+      std::lock_guard<std::mutex> lock(frame_mutex);
+      status.paused = paused;
+      status.recording = recording_path;
+      if (cloud_served < cloud_requested && latest_seq > 0) {
+        latest_cloud = result.cloud;  // the last processed frame's, also while paused
+        cloud_served = cloud_requested;
+        frame_cv.notify_all();
+      }
+    }
+    if (paused && !step) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      continue;
+    }
+    std::optional<Frame> frame;
+    try {
+      camera->SetIntegrationTimeRegister(
+          std::clamp(reg, info.min_integration_register, info.max_integration_register));
+    } catch (const Error&) {
+      // A recording or an import: nothing to set.
+    }
+    try {
+      frame = camera->Grab();
+    } catch (const Error& e) {
+      std::lock_guard<std::mutex> lock(frame_mutex);
+      status.last_error = e.what();
+      frame.reset();
+    }
+    if (!frame) {
+      {
+        std::lock_guard<std::mutex> lock(frame_mutex);
+        status.ended = true;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      continue;
+    }
+    pipeline->Process(*frame, result);
+    reg = result.next_integration_register;
+    if (result.next_modulation_frequency_hz != frame->info.modulation_frequency_hz) {
+      camera->SetModulationFrequencyHz(result.next_modulation_frequency_hz);
+    }
+    if (recorder) {
+      try {
+        recorder->Append(*frame);
+      } catch (const Error& e) {
+        std::lock_guard<std::mutex> lock(frame_mutex);
+        status.last_error = std::string("recording: ") + e.what();
+        recorder.reset();
+        recording_path.clear();
+      }
+    }
+    ++frames;
+    const Clock::time_point now = Clock::now();
+    times.push_back(now);
+    while (!times.empty() && now - times.front() > std::chrono::seconds(1)) times.pop_front();
+    const double fps = static_cast<double>(times.size());
+
+    // The message: a JSON header, then the planes (docs/viewer.md).
+    const MetricFrame& m = result.frame;
+    const int w = m.width(), h = m.height();
+    const std::size_t n = static_cast<std::size_t>(w) * h;
+    const Image<Rgb8> raw = pipeline->RenderRaw(result);
+    const Image<Rgb8> filtered = pipeline->RenderFiltered(result);
+    std::vector<std::pair<std::string, std::pair<std::string, std::string>>> planes;  // name, type
+    std::string body;
+    json header;
+    json list = json::array();
+    const auto add = [&](const std::string& name, const char* type, const void* data,
+                         std::size_t bytes) {
+      while (body.size() % 4 != 0) body.push_back('\0');
+      list.push_back({{"name", name}, {"type", type}, {"offset", body.size()}, {"bytes", bytes}});
+      Append(body, data, bytes);
+    };
+    add("raw_rgb", "u8", raw.data(), n * 3);
+    add("filtered_rgb", "u8", filtered.data(), n * 3);
+    add("distance_m", "f32", m.radial_distance_m.data(), n * 4);
+    add("amplitude", "f32", m.amplitude.data(), n * 4);
+    if (m.has_intensity()) add("intensity", "f32", m.intensity.data(), n * 4);
+    if (!m.delta_l_m.empty()) add("delta_l_m", "f32", m.delta_l_m.data(), n * 4);
+    add("flags", "u16", m.flags.data(), n * 2);
+    add("input_flags", "u16", result.input_flags.data(), n * 2);
+    if (m.truth) {
+      std::vector<float> error(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        error[i] = m.radial_distance_m[i] - m.truth->radial_distance_m[i];
+      }
+      add("error_m", "f32", error.data(), n * 4);
+    }
+    const FrameStats& s = result.stats;
+    header["width"] = w;
+    header["height"] = h;
+    header["timestamp_s"] = s.timestamp_s;
+    header["register"] = s.integration_time_register;
+    header["integration_time_us"] = s.integration_time_us;
+    header["next_register"] = result.next_integration_register;
+    header["mean_intensity"] = Finite(s.mean_intensity);
+    header["target_intensity"] = pipeline->options().controller.target_intensity;
+    header["valid_fraction"] = Finite(s.valid_fraction);
+    header["mean_delta_l_m"] = Finite(s.mean_delta_l_m);
+    header["rmse_m"] = m.truth ? Finite(s.rmse_m) : json(nullptr);
+    header["frames_per_s"] = fps;
+    header["controller"] = std::string(pipeline->ControllerName());
+    header["pan_deg"] = frame->info.pan_angle_rad * 180.0 / M_PI;
+    header["modulation_frequency_hz"] = frame->info.modulation_frequency_hz;
+    header["range_m"] = UnambiguousRangeM(frame->info.modulation_frequency_hz);
+    header["planes"] = list;
+    {
+      std::lock_guard<std::mutex> lock(frame_mutex);
+      header["seq"] = latest_seq + 1;
+      header["recording"] = recording_path;
+      header["dropped"] = status.dropped;
+    }
+    std::string head = header.dump();
+    while ((head.size() + 12) % 8 != 0) head.push_back(' ');
+    auto message = std::make_shared<std::string>();
+    message->reserve(12 + head.size() + body.size());
+    const std::uint32_t prefix[3] = {kMagic, kFormatVersion,
+                                     static_cast<std::uint32_t>(head.size())};
+    Append(*message, prefix, sizeof prefix);
+    message->append(head);
+    message->append(body);
+    {
+      std::lock_guard<std::mutex> lock(frame_mutex);
+      latest = std::move(message);
+      ++latest_seq;
+
+      status.frames = frames;
+      status.frames_per_s = fps;
+      status.valid_fraction = s.valid_fraction;
+      status.controller = std::string(pipeline->ControllerName());
+      status.cpu_ms_per_frame = 1e3 * (CpuSeconds() - cpu_start) / frames;
+      status.ended = false;
+    }
+    frame_cv.notify_all();
+    if (options.max_frames > 0 && frames >= options.max_frames) break;
+  }
+  if (recorder) {
+    try {
+      recorder->Close();
+    } catch (const Error&) {
+    }
+  }
+  finished = true;
+  done_cv.notify_all();
+}
+
+void ViewerServer::Impl::Routes() {
+  server.set_payload_max_length(options.max_body_bytes);
+  server.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+    if (!HostAllowed(req)) {
+      res.status = 403;
+      res.set_content("forbidden: foreign Host or Origin\n", "text/plain");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    return httplib::Server::HandlerResponse::Unhandled;
+  });
+  server.set_error_handler([](const httplib::Request&, httplib::Response& res) {
+    if (res.body.empty()) {
+      res.set_content("HTTP " + std::to_string(res.status) + "\n", "text/plain");
+    }
+  });
+  const auto text = [](httplib::Response& res, const char* body, const char* type) {
+    res.set_content(body, type);
+    res.set_header("Cache-Control", "no-store");
+  };
+  server.Get("/", [text](const httplib::Request&, httplib::Response& res) {
+    text(res, assets::kIndexHtml, "text/html; charset=utf-8");
+  });
+  server.Get("/viewer.js", [text](const httplib::Request&, httplib::Response& res) {
+    text(res, assets::kViewerJs, "text/javascript; charset=utf-8");
+  });
+  server.Get("/three.min.js", [this](const httplib::Request&, httplib::Response& res) {
+    if (three_js.empty()) {
+      res.status = 404;
+      res.set_content("three.js is not installed (apt-get install libjs-three)\n", "text/plain");
+      return;
+    }
+    res.set_content(three_js, "text/javascript");
+  });
+  server.Get("/OrbitControls.js", [this](const httplib::Request&, httplib::Response& res) {
+    if (orbit_js.empty()) {
+      res.status = 404;
+      res.set_content("OrbitControls.js is not installed (apt-get install libjs-three)\n",
+                      "text/plain");
+      return;
+    }
+    res.set_content(orbit_js, "text/javascript");
+  });
+  server.Get("/meta", [this](const httplib::Request&, httplib::Response& res) {
+    res.set_content(MetaJson(), "application/json");
+  });
+  server.Get("/rays", [this](const httplib::Request&, httplib::Response& res) {
+    res.set_content(rays, "application/octet-stream");
+  });
+  server.Get("/status", [this](const httplib::Request&, httplib::Response& res) {
+    const ViewerStatus s = [this] {
+      std::lock_guard<std::mutex> lock(frame_mutex);
+      return status;
+    }();
+    json j = {{"frames", s.frames},
+              {"frames_per_s", s.frames_per_s},
+              {"valid_fraction", s.valid_fraction},
+              {"dropped", s.dropped},
+              {"served", s.served},
+              {"cpu_ms_per_frame", s.cpu_ms_per_frame},
+              {"paused", s.paused},
+              {"ended", s.ended},
+              {"controller", s.controller},
+              {"recording", s.recording},
+              {"last_error", s.last_error}};
+    res.set_content(j.dump(), "application/json");
+    res.set_header("Cache-Control", "no-store");
+  });
+  server.Get("/frame", [this](const httplib::Request& req, httplib::Response& res) {
+    long long after = 0;
+    const std::string a = req.get_param_value("after");
+    if (!a.empty()) {
+      char* end = nullptr;
+      after = std::strtoll(a.c_str(), &end, 10);
+      if (end == a.c_str() || *end != '\0' || after < 0) {
+        res.status = 400;
+        res.set_content("after must be a frame number >= 0\n", "text/plain");
+        return;
+      }
+    }
+    const std::string client = req.get_param_value("client");
+    if (client.size() > 64 ||
+        client.find_first_not_of(
+            "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") !=
+            std::string::npos) {
+      res.status = 400;
+      res.set_content("client must be at most 64 letters, digits, '-' or '_'\n", "text/plain");
+      return;
+    }
+    std::unique_lock<std::mutex> lock(frame_mutex);
+    frame_cv.wait_for(lock, std::chrono::seconds(2),
+                      [&] { return latest_seq > after || stopping.load(); });
+    if (latest_seq <= after || !latest) {
+      res.status = 204;
+      return;
+    }
+    const std::shared_ptr<const std::string> message = latest;
+    // Frames this client did not fetch: it was slower than the camera.
+    if (after > 0 && latest_seq > after + 1) {
+      const long long skipped = latest_seq - after - 1;
+      status.dropped += skipped;
+      if (!client.empty() && (dropped_by_client.size() < 1024 || dropped_by_client.count(client))) {
+        dropped_by_client[client] += skipped;
+      }
+    }
+    ++status.served;
+    lock.unlock();
+    // Streamed from the shared message: no copy of a frame per client.
+    res.set_content_provider(
+        message->size(), "application/octet-stream",
+        [message](std::size_t offset, std::size_t length, httplib::DataSink& sink) {
+          sink.write(message->data() + offset, length);
+          return true;
+        });
+    res.set_header("Cache-Control", "no-store");
+  });
+  server.Get("/cloud.ply", [this](const httplib::Request&, httplib::Response& res) {
+    PointCloud cloud;
+    {
+      std::unique_lock<std::mutex> lock(frame_mutex);
+      const long long mine = ++cloud_requested;
+      frame_cv.wait_for(lock, std::chrono::seconds(2),
+                        [&] { return cloud_served >= mine || stopping.load(); });
+      if (cloud_served >= mine) cloud = latest_cloud;
+    }
+    if (cloud.empty()) {
+      res.status = 404;
+      res.set_content("no cloud (the camera is paused or ended, or the point cloud stage is off)\n",
+                      "text/plain");
+      return;
+    }
+    const std::filesystem::path tmp =
+        std::filesystem::temp_directory_path() /
+        ("tofcam_view_" + std::to_string(::getpid()) + "_" +
+         std::to_string(std::hash<std::thread::id>{}(std::this_thread::get_id())) + ".ply");
+    try {
+      WritePly(tmp, cloud, PlyFormat::kBinary, /*only_valid=*/true);
+    } catch (const Error& e) {
+      res.status = 500;
+      res.set_content(std::string(e.what()) + "\n", "text/plain");
+      return;
+    }
+    res.set_content(ReadWholeFile(tmp), "application/octet-stream");
+    std::error_code ec;
+    std::filesystem::remove(tmp, ec);
+    res.set_header("Content-Disposition", "attachment; filename=\"tofcam_cloud.ply\"");
+  });
+  server.Post("/control", [this](const httplib::Request& req, httplib::Response& res) {
+    const std::string reason = Control(req.body);
+    if (!reason.empty()) {
+      res.status = 400;
+      res.set_content(json({{"error", reason}}).dump(), "application/json");
+      return;
+    }
+    res.set_content(R"({"ok":true})", "application/json");
+  });
+}
+
+ViewerServer::ViewerServer(const ViewerOptions& options, const PipelineOptions& pipeline,
+                           CameraOpener opener)
+    : impl_(std::make_unique<Impl>()) {
+  options.Validate();
+  Impl& d = *impl_;
+  d.options = options;
+  d.opener = std::move(opener);
+  d.camera = d.opener(options.camera_spec);
+  d.info = d.camera->Info();
+  try {
+    d.camera->SetPanAngleRad(d.camera->PanAngleRad());
+    d.pan_supported = true;
+  } catch (const Error&) {
+    d.pan_supported = false;
+  }
+  d.desired.pipeline = pipeline;
+  d.desired.camera_spec = options.camera_spec;
+  // Validates the pipeline against the camera now, so a bad option fails before serving.
+  const Pipeline probe(pipeline, d.info);
+  d.rays = d.RaysBinary(probe);
+  d.three_js = ReadWholeFile(options.three_js_dir / "three.min.js");
+  d.orbit_js = ReadWholeFile(options.three_js_dir / "examples/js/controls/OrbitControls.js");
+  d.Routes();
+  if (options.port == 0) {
+    d.port = d.server.bind_to_any_port(options.bind_address);
+  } else {
+    d.port = d.server.bind_to_port(options.bind_address, options.port) ? options.port : -1;
+  }
+  if (d.port <= 0) {
+    throw Error(ErrorCode::kIo, "cannot listen on " + options.bind_address + ":" +
+                                    std::to_string(options.port) +
+                                    " (in use, or not an address of this machine)");
+  }
+}
+
+ViewerServer::~ViewerServer() { Stop(); }
+
+int ViewerServer::port() const noexcept { return impl_->port; }
+
+void ViewerServer::Start() {
+  Impl& d = *impl_;
+  d.loop_thread = std::thread([&d] { d.Loop(); });
+  d.http_thread = std::thread([&d] { d.server.listen_after_bind(); });
+}
+
+bool ViewerServer::WaitFor(double seconds) {
+  Impl& d = *impl_;
+  std::unique_lock<std::mutex> lock(d.done_mutex);
+  return d.done_cv.wait_for(lock, std::chrono::duration<double>(seconds),
+                            [&d] { return d.finished.load() || d.stopping.load(); });
+}
+
+void ViewerServer::Stop() {
+  Impl& d = *impl_;
+  d.stopping = true;
+  d.frame_cv.notify_all();
+  d.done_cv.notify_all();
+  d.server.stop();
+  if (d.loop_thread.joinable()) d.loop_thread.join();
+  if (d.http_thread.joinable()) d.http_thread.join();
+}
+
+std::string ViewerServer::ApplyControl(const std::string& json_body) {
+  return impl_->Control(json_body);
+}
+
+ViewerStatus ViewerServer::Status() const {
+  std::lock_guard<std::mutex> lock(impl_->frame_mutex);
+  return impl_->status;
+}
+
+}  // namespace tofcam::viewer

@@ -1,0 +1,228 @@
+// The viewer's server on loopback (issue 17): hostile and malformed requests get 4xx and leave the
+// camera loop running; controls apply to the next frame; frames are the documented binary.
+#include "viewer_server.h"
+
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include <chrono>
+#include <cstring>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+
+#include "tofcam/sim/simulated_camera.h"
+
+namespace tofcam::viewer {
+namespace {
+
+using json = nlohmann::json;
+
+std::unique_ptr<Camera> OpenSim(const std::string& spec) {
+  if (spec.rfind("sim:", 0) != 0) throw Error(ErrorCode::kInvalidArgument, "not sim: " + spec);
+  auto [name, overrides] = sim::ParseSceneSpec(spec.substr(4));
+  return std::make_unique<sim::SimulatedCamera>(
+      sim::ResolveScene(name, overrides), sim::ResolveCameraModel("sr2"), sim::SimulatorOptions{});
+}
+
+class ViewerServerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ViewerOptions o;
+    o.port = 0;
+    o.camera_spec = "sim:hand";
+    o.record_dir = ::testing::TempDir() + "tofcam_view_test";
+    PipelineOptions p;
+    server_ = std::make_unique<ViewerServer>(o, p, OpenSim);
+    server_->Start();
+    client_ = std::make_unique<httplib::Client>("127.0.0.1", server_->port());
+    client_->set_read_timeout(5, 0);
+    WaitFrames(2);
+  }
+  void TearDown() override { server_->Stop(); }
+
+  // Waits (bounded) until the loop has processed `more` further frames; false on timeout.
+  bool WaitFrames(long long more) {
+    const long long target = server_->Status().frames + more;
+    for (int k = 0; k < 500; ++k) {
+      if (server_->Status().frames >= target) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return false;
+  }
+  int Post(const std::string& body, std::string* reply = nullptr) {
+    const auto r = client_->Post("/control", body, "application/json");
+    if (!r) return -1;
+    if (reply) *reply = r->body;
+    return r->status;
+  }
+
+  std::unique_ptr<ViewerServer> server_;
+  std::unique_ptr<httplib::Client> client_;
+};
+
+TEST_F(ViewerServerTest, HostileRequestsGet4xxAndTheLoopRuns) {
+  std::string reply;
+  EXPECT_EQ(Post("{not json", &reply), 400);
+  EXPECT_NE(reply.find("not valid JSON"), std::string::npos) << reply;
+  EXPECT_EQ(Post("[1, 2]"), 400);
+  EXPECT_EQ(Post(R"({"target_intensity": -5})", &reply), 400);
+  EXPECT_NE(reply.find("target_intensity"), std::string::npos) << reply;
+  EXPECT_EQ(Post(R"({"target_intensity": "high"})"), 400);
+  EXPECT_EQ(Post(R"({"max_delta_l_m": 1e308})"), 400);
+  EXPECT_EQ(Post(R"({"fixed_register": 100000})"), 400);
+  EXPECT_EQ(Post(R"({"controller": "pid"})"), 400);
+  EXPECT_EQ(Post(R"({"filters": {"accuracy": 1}})"), 400);
+  EXPECT_EQ(Post(R"({"filters": {"magic": true}})"), 400);
+  EXPECT_EQ(Post(R"({"no_such_control": 1})", &reply), 400);
+  EXPECT_NE(reply.find("no_such_control"), std::string::npos) << reply;
+  EXPECT_EQ(Post(R"({"scene": {"Bad Name": 1}})"), 400);
+  EXPECT_EQ(Post(R"({"scene": {"no_such_parameter": 1}})", &reply), 400);
+  EXPECT_EQ(Post(R"({"record": "maybe"})"), 400);
+  // A refused control changes nothing, even its valid parts.
+  EXPECT_EQ(Post(R"({"paused": true, "target_intensity": -1})"), 400);
+  EXPECT_FALSE(server_->Status().paused);
+  // Huge body: refused before it is read into a control.
+  EXPECT_EQ(Post(std::string(200 * 1024, 'a')), 413);
+  // Routes that do not exist, path traversal, bad query values.
+  for (const char* path : {"/nope", "/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd",
+                           "/viewer.js/../../../etc/passwd", "/web/index.html"}) {
+    const auto r = client_->Get(path);
+    ASSERT_TRUE(r) << path;
+    EXPECT_EQ(r->status, 404) << path;
+  }
+  EXPECT_EQ(client_->Get("/frame?after=-3")->status, 400);
+  EXPECT_EQ(client_->Get("/frame?after=abc")->status, 400);
+  EXPECT_EQ(client_->Get("/frame?client=" + std::string(100, 'x'))->status, 400);
+  EXPECT_EQ(client_->Get("/frame?client=a/b")->status, 400);
+  // Another site's page, or a DNS name that is not this server.
+  EXPECT_EQ(client_->Get("/status", {{"Origin", "http://evil.example"}})->status, 403);
+  EXPECT_EQ(client_->Get("/status", {{"Host", "evil.example"}})->status, 403);
+  EXPECT_EQ(client_
+                ->Post("/control", {{"Origin", "http://evil.example"}}, R"({"paused": true})",
+                       "application/json")
+                ->status,
+            403);
+  EXPECT_FALSE(server_->Status().paused);
+  // The same page's origin is fine.
+  const std::string self = "http://127.0.0.1:" + std::to_string(server_->port());
+  EXPECT_EQ(client_->Get("/status", {{"Origin", self}})->status, 200);
+  // Through all of that the camera loop kept running.
+  EXPECT_TRUE(WaitFrames(3));
+}
+
+TEST_F(ViewerServerTest, FramesAreTheDocumentedBinaryAndSkippedFramesAreCounted) {
+  const auto r = client_->Get("/frame?after=0&client=t");
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 200);
+  const std::string& b = r->body;
+  ASSERT_GT(b.size(), 12u);
+  std::uint32_t prefix[3];
+  std::memcpy(prefix, b.data(), 12);
+  EXPECT_EQ(prefix[0], 0x56464f54u);  // "TOFV"
+  EXPECT_EQ(prefix[1], 1u);
+  const json h = json::parse(b.substr(12, prefix[2]));
+  const std::size_t base = 12 + prefix[2];
+  EXPECT_EQ(base % 8, 0u);
+  const int n = h.at("width").get<int>() * h.at("height").get<int>();
+  const sim::CameraModel sr2 = sim::ResolveCameraModel("sr2");
+  const CameraInfo info = sr2.Info(sr2.modulation_frequencies_hz.front());
+  EXPECT_EQ(n, info.width() * info.height());
+  std::map<std::string, std::size_t> bytes;
+  for (const json& p : h.at("planes")) {
+    const std::size_t offset = p.at("offset"), size = p.at("bytes");
+    EXPECT_EQ(offset % 4, 0u);
+    EXPECT_LE(base + offset + size, b.size());
+    bytes[p.at("name")] = size;
+  }
+  EXPECT_EQ(bytes.at("raw_rgb"), 3u * n);
+  EXPECT_EQ(bytes.at("filtered_rgb"), 3u * n);
+  EXPECT_EQ(bytes.at("distance_m"), 4u * n);
+  EXPECT_EQ(bytes.at("flags"), 2u * n);
+  EXPECT_EQ(bytes.at("error_m"), 4u * n);  // the simulator has truth
+  // A client that asks again after the loop moved on has skipped those frames: counted.
+  const long long seq = h.at("seq");
+  ASSERT_TRUE(WaitFrames(4));
+  const auto again = client_->Get("/frame?after=" + std::to_string(seq) + "&client=t");
+  ASSERT_TRUE(again);
+  std::memcpy(prefix, again->body.data(), 12);
+  const long long seq2 = json::parse(again->body.substr(12, prefix[2])).at("seq");
+  EXPECT_GE(seq2, seq + 4);
+  EXPECT_GE(server_->Status().dropped, seq2 - seq - 1);
+  // Nothing newer within the wait: 204, not a stale frame.
+  ASSERT_EQ(server_->ApplyControl(R"({"paused": true})"), "");
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  const long long now = server_->Status().frames + 1000;
+  EXPECT_EQ(client_->Get("/frame?after=" + std::to_string(now))->status, 204);
+}
+
+TEST_F(ViewerServerTest, ControlsApplyToTheNextFrames) {
+  std::string reply;
+  // The hand scene at the default exposure: the accuracy filter removes the noisy far pixels;
+  // off, the kept set is a superset (every other filter unchanged), so valid rises.
+  ASSERT_TRUE(WaitFrames(3));
+  const double with = server_->Status().valid_fraction;
+  ASSERT_EQ(Post(R"({"filters": {"accuracy": false}})"), 200);
+  ASSERT_TRUE(WaitFrames(3));
+  const double without = server_->Status().valid_fraction;
+  EXPECT_GT(without, with);
+  // Pause holds the loop (the cloud of the last frame is still there); step runs exactly the
+  // frames asked for.
+  ASSERT_EQ(Post(R"({"paused": true})"), 200);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const long long held = server_->Status().frames;
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_EQ(server_->Status().frames, held);
+  const auto paused_ply = client_->Get("/cloud.ply");
+  ASSERT_TRUE(paused_ply);
+  EXPECT_EQ(paused_ply->status, 200);
+  ASSERT_EQ(Post(R"({"step": 2})"), 200);
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  EXPECT_EQ(server_->Status().frames, held + 2);
+  ASSERT_EQ(Post(R"({"paused": false, "fixed_register": 20})"), 200);
+  ASSERT_TRUE(WaitFrames(3));
+  EXPECT_EQ(server_->Status().controller, "fixed");
+  // Scene parameters reopen the simulator: the hand moves from 0.2 to 0.6 m, and a pixel at
+  // the image centre (on the hand in both) reads about 0.4 m further.
+  const auto centre_distance = [&] {
+    const auto r = client_->Get("/frame?after=" + std::to_string(server_->Status().frames));
+    std::uint32_t prefix[3];
+    std::memcpy(prefix, r->body.data(), 12);
+    const json h = json::parse(r->body.substr(12, prefix[2]));
+    for (const json& p : h.at("planes")) {
+      if (p.at("name") != "distance_m") continue;
+      const int w = h.at("width"), ht = h.at("height");
+      float d;
+      std::memcpy(&d,
+                  r->body.data() + 12 + prefix[2] + p.at("offset").get<std::size_t>() +
+                      4 * (static_cast<std::size_t>(ht / 2) * w + w / 2),
+                  4);
+      return static_cast<double>(d);
+    }
+    return -1.0;
+  };
+  const double near = centre_distance();
+  ASSERT_EQ(Post(R"({"scene": {"hand_distance_m": 0.6}})", &reply), 200) << reply;
+  ASSERT_TRUE(WaitFrames(3));
+  const double far = centre_distance();
+  EXPECT_NEAR(far - near, 0.4, 0.1) << near << " -> " << far;
+  // The pan unit turns.
+  ASSERT_EQ(Post(R"({"pan_deg": 10})"), 200);
+  // The cloud as PLY.
+  const auto ply = client_->Get("/cloud.ply");
+  ASSERT_TRUE(ply);
+  EXPECT_EQ(ply->status, 200);
+  EXPECT_EQ(ply->body.rfind("ply\n", 0), 0u);
+  // Recording to HDF5 starts and stops.
+  ASSERT_EQ(Post(R"({"record": "start"})"), 200);
+  ASSERT_TRUE(WaitFrames(3));
+  const std::string path = server_->Status().recording;
+  EXPECT_FALSE(path.empty()) << server_->Status().last_error;
+  ASSERT_EQ(Post(R"({"record": "stop"})"), 200);
+  ASSERT_TRUE(WaitFrames(2));
+  EXPECT_TRUE(server_->Status().recording.empty());
+  EXPECT_TRUE(std::filesystem::exists(path)) << path;
+}
+
+}  // namespace
+}  // namespace tofcam::viewer
