@@ -5,6 +5,7 @@
 
 #include <filesystem>
 
+#include "../scratch_dir.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -12,11 +13,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-fs::path TempDir() {
-  fs::path d = fs::temp_directory_path() / ("tofcam_atomic_" + std::to_string(::getpid()));
-  fs::create_directories(d);
-  return d;
-}
+fs::path TempDir() { return testing::ScratchDir("tofcam_atomic_"); }
 
 TEST(AtomicFileTest, WritesAndReadsBack) {
   const fs::path p = TempDir() / "a.txt";

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "../scratch_dir.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 
@@ -22,11 +23,7 @@ namespace {
 namespace fs = std::filesystem;
 constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 
-fs::path Temp(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("tofcam_cloud_io_" + std::to_string(::getpid()));
-  fs::create_directories(d);
-  return d / name;
-}
+fs::path Temp(const std::string& name) { return testing::ScratchDir("tofcam_cloud_io_") / name; }
 
 // What an independent reader recovers: named columns as doubles, plus header facts.
 struct Parsed {

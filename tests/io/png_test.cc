@@ -5,6 +5,7 @@
 
 #include <filesystem>
 
+#include "../scratch_dir.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 
@@ -13,11 +14,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-fs::path Temp(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("tofcam_png_" + std::to_string(::getpid()));
-  fs::create_directories(d);
-  return d / name;
-}
+fs::path Temp(const std::string& name) { return testing::ScratchDir("tofcam_png_") / name; }
 
 TEST(PngTest, Rgb8RoundTrip) {
   Image<Rgb8> img(5, 3);

@@ -9,16 +9,17 @@
 #include <functional>
 #include <string>
 
+#include "../scratch_dir.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam::sim {
 namespace {
 
 // Per-process names: ctest may run several of these tests (or several build trees) at once.
-std::string Prefix() { return "tofcam_scene_test_" + std::to_string(::getpid()) + "_"; }
+std::string Prefix() { return "tofcam_scene_test_"; }
 
 std::filesystem::path TempFile(const std::string& name, const std::string& content) {
-  const auto path = std::filesystem::temp_directory_path() / (Prefix() + name);
+  const auto path = testing::ScratchDir("tofcam_scene_test_") / (Prefix() + name);
   std::ofstream out(path, std::ios::binary);
   out << content;
   return path;
