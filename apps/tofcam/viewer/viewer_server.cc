@@ -368,7 +368,9 @@ std::string ViewerServer::Impl::Control(const std::string& body) {
       }
     }
     try {
-      p.Validate();
+      // Everything the pipeline checks against this camera (register bounds, calibration), so
+      // the loop never meets a configuration it cannot build.
+      const Pipeline probe(p, info);
     } catch (const Error& e) {
       throw std::string(e.what());
     }
@@ -429,8 +431,18 @@ void ViewerServer::Impl::Loop() {
       if (!pipeline || desired.pipeline_version != applied_version) {
         PipelineOptions p = desired.pipeline;
         p.color_legend = false;  // the page draws its own legend
-        pipeline.emplace(std::move(p), info);
         applied_version = desired.pipeline_version;
+        try {
+          Pipeline fresh(std::move(p), info);  // the old one stays if this throws
+          pipeline.emplace(std::move(fresh));
+        } catch (const std::exception& e) {
+          std::lock_guard<std::mutex> frame_lock(frame_mutex);
+          status.last_error = std::string("pipeline: ") + e.what();
+        }
+        if (!pipeline) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(50));
+          continue;
+        }
         if (reg == 0) reg = pipeline->InitialIntegrationRegister();
         if (pipeline->options().controller_enabled &&
             pipeline->options().controller.kind == ControllerKind::kFixed) {
@@ -515,15 +527,24 @@ void ViewerServer::Impl::Loop() {
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
       continue;
     }
-    pipeline->Process(*frame, result);
-    reg = result.next_integration_register;
-    if (result.next_modulation_frequency_hz != frame->info.modulation_frequency_hz) {
-      camera->SetModulationFrequencyHz(result.next_modulation_frequency_hz);
+    try {
+      pipeline->Process(*frame, result);
+      reg = result.next_integration_register;
+      if (result.next_modulation_frequency_hz != frame->info.modulation_frequency_hz) {
+        camera->SetModulationFrequencyHz(result.next_modulation_frequency_hz);
+      }
+    } catch (const std::exception& e) {
+      // A frame the pipeline refuses (e.g. a source that changed its size) is reported and
+      // skipped; the server keeps serving the last good frame.
+      std::lock_guard<std::mutex> lock(frame_mutex);
+      status.last_error = e.what();
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      continue;
     }
     if (recorder) {
       try {
         recorder->Append(*frame);
-      } catch (const Error& e) {
+      } catch (const std::exception& e) {
         std::lock_guard<std::mutex> lock(frame_mutex);
         status.last_error = std::string("recording: ") + e.what();
         recorder.reset();
