@@ -5,25 +5,6 @@ namespace {
 
 // ---- controllers ----------------------------------------------------------------------------
 
-// The first view of a dynamic scene, frozen: every trajectory, the pan schedule and the lamps
-// keep their state at t = 0 (the paper's set point comes from a sweep of a static view).
-sim::Scene FirstView(sim::Scene scene) {
-  const auto freeze = [](sim::Trajectory& trajectory) {
-    // Trajectories are held constant before their first key, so t = 0 is the first key when it
-    // is not negative (true of every built-in scene).
-    if (trajectory.keys.front().time_s < 0) {
-      throw Error(ErrorCode::kInternal, "FirstView: a trajectory starts before t = 0");
-    }
-    trajectory.keys.resize(1);
-  };
-  for (sim::SceneObject& object : scene.objects) freeze(object.motion);
-  freeze(scene.camera);
-  if (!scene.pan_schedule.empty()) scene.pan_schedule.resize(1);
-  for (sim::Lamp& lamp : scene.lamps) lamp.schedule = {{0.0, lamp.OnAt(0.0)}};
-  scene.duration_s = 0.0;
-  return scene;
-}
-
 }  // namespace
 
 ExperimentResult Controllers(const ExperimentOptions& o) {
@@ -38,7 +19,7 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
   // ChooseSetpoint on it (I_A a little below the intensity at the amplitude maximum).
   ControllerSetpoint sweep_setpoint;
   {
-    sim::SimulatedCamera camera(FirstView(sim::LoadBuiltinScene("approach")), s.model,
+    sim::SimulatedCamera camera(sim::StaticView(sim::LoadBuiltinScene("approach")), s.model,
                                 Sim(o, 199, 0));
     IntegrationSweepOptions so;
     so.steps = Scaled(32, o.effort, 8);

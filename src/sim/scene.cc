@@ -611,6 +611,23 @@ Scene LoadBuiltinScene(const std::string& name, const SceneOverrides& overrides)
               "unknown scene '" + name + "' (built-in: " + known + "; or a path to a .yaml file)");
 }
 
+Scene StaticView(Scene scene) {
+  const auto freeze = [](Trajectory& trajectory) {
+    if (trajectory.keys.empty()) return;
+    if (trajectory.keys.front().time_s < 0) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "StaticView: a trajectory starts before t = 0 (its pose there is interpolated)");
+    }
+    trajectory.keys.resize(1);
+  };
+  for (SceneObject& object : scene.objects) freeze(object.motion);
+  freeze(scene.camera);
+  if (!scene.pan_schedule.empty()) scene.pan_schedule.resize(1);
+  for (Lamp& lamp : scene.lamps) lamp.schedule = {{0.0, lamp.OnAt(0.0)}};
+  scene.duration_s = 0.0;
+  return scene;
+}
+
 Scene ResolveScene(const std::string& name_or_path, const SceneOverrides& overrides) {
   const std::filesystem::path p(name_or_path);
   const bool file_name = p.extension() == ".yaml" || p.extension() == ".yml";

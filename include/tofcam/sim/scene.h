@@ -108,6 +108,12 @@ using SceneOverrides = std::map<std::string, std::string>;
 [[nodiscard]] std::vector<std::string> BuiltinSceneNames();
 /// A built-in scene by name; Error(kNotFound) listing the names when unknown.
 [[nodiscard]] Scene LoadBuiltinScene(const std::string& name, const SceneOverrides& overrides = {});
+/// The scene as it is at t = 0, held still: every trajectory (objects, camera) keeps its first
+/// key (trajectories are held constant before it), the pan schedule its first entry, every lamp
+/// its state at t = 0; duration 0. For static sequences of dynamic scenes (noise statistics, set
+/// points). Throws Error(kInvalidArgument) when a trajectory's first key is before t = 0.
+[[nodiscard]] Scene StaticView(Scene scene);
+
 /// A built-in scene name, an embedded scene in a folder (e.g. "calibration/scattering-card",
 /// not part of BuiltinSceneNames()) or a path to a YAML file.
 [[nodiscard]] Scene ResolveScene(const std::string& name_or_path,
