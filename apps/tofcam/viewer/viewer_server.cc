@@ -563,7 +563,6 @@ void ViewerServer::Impl::Loop() {
     const std::size_t n = static_cast<std::size_t>(w) * h;
     const Image<Rgb8> raw = pipeline->RenderRaw(result);
     const Image<Rgb8> filtered = pipeline->RenderFiltered(result);
-    std::vector<std::pair<std::string, std::pair<std::string, std::string>>> planes;  // name, type
     std::string body;
     json header;
     json list = json::array();
