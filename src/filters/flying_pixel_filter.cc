@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <vector>
@@ -14,18 +15,34 @@ namespace tofcam {
 namespace filters_internal {
 namespace {
 
-// Per-row horizontal 3-sums (weight, amplitude, amplitude², and 3-min / 3-max of the distance)
-// kept for three rolling rows, so the working set stays in L1; the vertical pass adds three rows.
-// Unusable pixels carry weight 0, amplitude 0 and distances that never win a min (+inf) or max
-// (-inf); a neutral row stands in above the first and below the last row. Reused per thread so
-// a stable frame size allocates nothing.
-struct Scratch {
-  std::vector<float> rows;  // 3 rolling rows of 5 sums each, plus one neutral row of each
-  std::vector<float> ca, cw, clo, chi;  // one padded input row
+// The test is split by cost. The distance conditions need only the 3x3 minimum and maximum of
+// the distance (separable: a horizontal 3-min / 3-max per row, then three rows), evaluated for
+// every pixel in vectorised row loops. The amplitude contrast needs the window's count, sum and
+// sum of squares; it is evaluated only where the distance conditions hold (a few per cent of the
+// pixels: depth edges), in the same order of float operations as a full evaluation (horizontal
+// sums per row, then rows up + mid + down), so the result is bit for bit that of the rule.
+//
+// Rows are prepared once into a ring of three padded rows: weight (1 usable, 0 not), amplitude
+// (0 if unusable), and the distance for the minimum (+inf if unusable) and the maximum (-inf).
+// A neutral row (weight 0, amplitude 0, distances that never win) stands above the first and
+// below the last row. Reused per thread so a stable frame size allocates nothing.
+struct Prepared {
+  float* w;
+  float* a;
+  float* lo;
+  float* hi;
 };
 
-// The loops live in functions with __restrict parameters: with a dozen pointers GCC otherwise
-// gives up on the run-time alias checks and does not vectorise.
+struct Scratch {
+  std::vector<float> prepared;  // 4 slots (3 ring rows + neutral) x 4 streams x (w + 2)
+  std::vector<float> minmax;    // 4 slots x 2 streams (3-min, 3-max) x w
+  std::vector<float> sums;      // 4 slots x 3 streams (count, Σa, Σa²) x w, computed on demand
+  std::vector<std::uint8_t> candidate;  // one row, padded to a multiple of 8
+};
+
+// The loops live in functions with __restrict parameters: with many pointers GCC otherwise
+// gives up on the run-time alias checks and does not vectorise. Output pointers point at the
+// padded row's first pixel (index 0 = column 0; index -1 and w are the pad).
 TOFCAM_HOT_LOOP void PrepareRow(int w, const float* __restrict d, const float* __restrict a,
                                 const PixelFlags* __restrict pf, float* __restrict cw,
                                 float* __restrict ca, float* __restrict clo,
@@ -36,24 +53,31 @@ TOFCAM_HOT_LOOP void PrepareRow(int w, const float* __restrict d, const float* _
     const bool usable = (static_cast<unsigned>(std::abs(d[c]) < kInf) &
                          static_cast<unsigned>(std::abs(a[c]) < kInf) &
                          static_cast<unsigned>((pf[c].bits() & kRejectMask) == 0)) != 0;
-    cw[c + 1] = usable ? 1.0f : 0.0f;
-    ca[c + 1] = usable ? a[c] : 0.0f;
-    clo[c + 1] = usable ? d[c] : kInf;
-    chi[c + 1] = usable ? d[c] : -kInf;
+    cw[c] = usable ? 1.0f : 0.0f;
+    ca[c] = usable ? a[c] : 0.0f;
+    clo[c] = usable ? d[c] : kInf;
+    chi[c] = usable ? d[c] : -kInf;
   }
 }
 
-TOFCAM_HOT_LOOP void HorizontalSums(int w, const float* __restrict cw, const float* __restrict ca,
-                                    const float* __restrict clo, const float* __restrict chi,
-                                    float* __restrict n, float* __restrict sum,
-                                    float* __restrict sum2, float* __restrict lo,
-                                    float* __restrict hi) {
+// Horizontal 3-min and 3-max of one prepared row (clo, chi padded: index -1 and w exist).
+TOFCAM_HOT_LOOP void HorizontalMinMax(int w, const float* __restrict clo,
+                                      const float* __restrict chi, float* __restrict lo,
+                                      float* __restrict hi) {
   for (int c = 0; c < w; ++c) {
-    n[c] = cw[c] + cw[c + 1] + cw[c + 2];
-    sum[c] = ca[c] + ca[c + 1] + ca[c + 2];
-    sum2[c] = ca[c] * ca[c] + ca[c + 1] * ca[c + 1] + ca[c + 2] * ca[c + 2];
-    lo[c] = std::min(std::min(clo[c], clo[c + 1]), clo[c + 2]);
-    hi[c] = std::max(std::max(chi[c], chi[c + 1]), chi[c + 2]);
+    lo[c] = std::min(std::min(clo[c - 1], clo[c]), clo[c + 1]);
+    hi[c] = std::max(std::max(chi[c - 1], chi[c]), chi[c + 1]);
+  }
+}
+
+// Horizontal 3-sums of one prepared row: count, Σa, Σa² (cw, ca padded).
+TOFCAM_HOT_LOOP void HorizontalSums(int w, const float* __restrict cw, const float* __restrict ca,
+                                    float* __restrict n, float* __restrict sum,
+                                    float* __restrict sum2) {
+  for (int c = 0; c < w; ++c) {
+    n[c] = cw[c - 1] + cw[c] + cw[c + 1];
+    sum[c] = ca[c - 1] + ca[c] + ca[c + 1];
+    sum2[c] = ca[c - 1] * ca[c - 1] + ca[c] * ca[c] + ca[c + 1] * ca[c + 1];
   }
 }
 
@@ -61,57 +85,75 @@ struct Thresholds {
   float contrast, floor_a, close, far, max_delta, avg_delta;
 };
 
-// Horizontal sums of one row: count, Σa, Σa², 3-min and 3-max of the distance.
-struct RowSums {
-  float* n;
-  float* sum;
-  float* sum2;
-  float* lo;
-  float* hi;
-};
-
-// Rows up (u), mid (m) and down (v) of the horizontal sums; all restrict-qualified so that GCC
-// vectorises without run-time alias checks.
-TOFCAM_HOT_LOOP void Decide(int w, const Thresholds& t, const float* __restrict nu,
-                            const float* __restrict nm, const float* __restrict nv,
-                            const float* __restrict su, const float* __restrict sm,
-                            const float* __restrict sv, const float* __restrict qu,
-                            const float* __restrict qm, const float* __restrict qv,
-                            const float* __restrict lu, const float* __restrict lm,
-                            const float* __restrict lv, const float* __restrict hu,
-                            const float* __restrict hm, const float* __restrict hv,
-                            const float* __restrict d, const float* __restrict a,
-                            const PixelFlags* __restrict pf, PixelFlags* __restrict f) {
-  constexpr float kInf = std::numeric_limits<float>::infinity();
-  const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
-  const float contrast = t.contrast, floor_a = t.floor_a, close = t.close, far = t.far;
-  const float max_delta = t.max_delta, avg_delta = t.avg_delta;
+// 1 where the centre is usable and the distance conditions hold (the rows' 3-min / 3-max up,
+// mid and down; `cw` the mid row's weights), else 0.
+TOFCAM_HOT_LOOP void DistanceCandidates(int w, const Thresholds& t, const float* __restrict lu,
+                                        const float* __restrict lm, const float* __restrict lv,
+                                        const float* __restrict hu, const float* __restrict hm,
+                                        const float* __restrict hv, const float* __restrict d,
+                                        const float* __restrict cw,
+                                        std::uint8_t* __restrict candidate) {
+  const float close = t.close, far = t.far, max_delta = t.max_delta, avg_delta = t.avg_delta;
   for (int c = 0; c < w; ++c) {
-    const float cnt = nu[c] + nm[c] + nv[c];
-    const float sum = su[c] + sm[c] + sv[c];
-    const float sum2 = qu[c] + qm[c] + qv[c];
     const float dmin = std::min(std::min(lu[c], lm[c]), lv[c]);
     const float dmax = std::max(std::max(hu[c], hm[c]), hv[c]);
-    // Population variance n·Σa² - (Σa)² over n², clamped against rounding below zero;
-    // std/mean >= contrast  <=>  var·n² >= (contrast·mean·n)²  (both sides >= 0).
-    const float nn = std::max(cnt, 1.0f);
-    const float var_n2 = std::max(nn * sum2 - sum * sum, 0.0f);
-    const float mean = std::max(sum / nn, floor_a);
-    const float lim = contrast * mean * nn;
     const float dc = d[c];
     const float to_min = dc - dmin, to_max = dmax - dc;
-    // Unusable centres (NaN / inf distance or amplitude, rejected) are cleared via `usable`;
-    // integer ANDs instead of && keep the loop free of branches.
-    const unsigned usable = static_cast<unsigned>(std::abs(dc) < kInf) &
-                            static_cast<unsigned>(std::abs(a[c]) < kInf) &
-                            static_cast<unsigned>((pf[c].bits() & kRejectMask) == 0);
-    const unsigned flying = usable & static_cast<unsigned>(var_n2 >= lim * lim) &
-                            static_cast<unsigned>(to_min > close) &
-                            static_cast<unsigned>(to_max > far) &
-                            static_cast<unsigned>(std::max(to_min, to_max) > max_delta) &
-                            static_cast<unsigned>(0.5f * (to_min + to_max) > avg_delta);
-    f[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
+    // Integer ANDs instead of && keep the loop free of branches.
+    const unsigned pass = static_cast<unsigned>(cw[c] != 0.0f) &
+                          static_cast<unsigned>(to_min > close) &
+                          static_cast<unsigned>(to_max > far) &
+                          static_cast<unsigned>(std::max(to_min, to_max) > max_delta) &
+                          static_cast<unsigned>(0.5f * (to_min + to_max) > avg_delta);
+    candidate[c] = static_cast<std::uint8_t>(pass);
   }
+}
+
+// Population variance n·Σa² - (Σa)² over n², clamped against rounding below zero;
+// std/mean >= contrast  <=>  var·n² >= (contrast·mean·n)²  (both sides >= 0).
+[[gnu::always_inline]] inline bool ContrastAtLeast(float cnt, float sum, float sum2,
+                                                   const Thresholds& t) {
+  const float nn = std::max(cnt, 1.0f);
+  const float var_n2 = std::max(nn * sum2 - sum * sum, 0.0f);
+  const float mean = std::max(sum / nn, t.floor_a);
+  const float lim = t.contrast * mean * nn;
+  return var_n2 >= lim * lim;
+}
+
+// The contrast test over a whole row (rows u, m, v of horizontal sums), for rows with many
+// candidates; flags the candidates that pass it.
+TOFCAM_HOT_LOOP void ContrastRow(int w, const Thresholds& t, const float* __restrict nu,
+                                 const float* __restrict nm, const float* __restrict nv,
+                                 const float* __restrict su, const float* __restrict sm,
+                                 const float* __restrict sv, const float* __restrict qu,
+                                 const float* __restrict qm, const float* __restrict qv,
+                                 const std::uint8_t* __restrict candidate,
+                                 PixelFlags* __restrict f) {
+  const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
+  for (int c = 0; c < w; ++c) {
+    const unsigned pass =
+        static_cast<unsigned>(candidate[c]) &
+        static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
+                                              qu[c] + qm[c] + qv[c], t));
+    f[c] |= PixelFlags(static_cast<std::uint16_t>(pass * bit));
+  }
+}
+
+// Number of candidates in a row (candidate[c] is 0 or 1).
+TOFCAM_HOT_LOOP std::uint32_t CountCandidates(int w, const std::uint8_t* __restrict candidate) {
+  std::uint32_t count = 0;
+  for (int c = 0; c < w; ++c) count += candidate[c];
+  return count;
+}
+
+// The amplitude contrast test of one candidate at column c (rows u, m, v of prepared weights and
+// amplitudes).
+bool HighContrast(int c, const Thresholds& t, const Prepared& u, const Prepared& m,
+                  const Prepared& v) {
+  auto n3 = [c](const float* x) { return x[c - 1] + x[c] + x[c + 1]; };
+  auto q3 = [c](const float* x) { return x[c - 1] * x[c - 1] + x[c] * x[c] + x[c + 1] * x[c + 1]; };
+  return ContrastAtLeast(n3(u.w) + n3(m.w) + n3(v.w), n3(u.a) + n3(m.a) + n3(v.a),
+                         q3(u.a) + q3(m.a) + q3(v.a), t);
 }
 
 }  // namespace
@@ -124,49 +166,88 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   const int w = frame.width(), h = frame.height();
   constexpr float kInf = std::numeric_limits<float>::infinity();
   const std::size_t sw = static_cast<std::size_t>(w);
+  const std::size_t pw = sw + 2;
   thread_local Scratch s;
-  s.rows.resize(4 * 5 * sw);
-  // Slot k in 0..3 holds a row's five sums at [k*5*w, (k+1)*5*w); slot 3 is the neutral row.
-  auto slot = [&](int k) {
-    float* base = s.rows.data() + static_cast<std::size_t>(k) * 5 * sw;
-    return RowSums{base, base + sw, base + 2 * sw, base + 3 * sw, base + 4 * sw};
+  s.prepared.resize(4 * 4 * pw);
+  s.minmax.resize(4 * 2 * sw);
+  s.sums.assign(4 * 3 * sw, 0.0f);  // the neutral slot's sums stay 0
+  s.candidate.assign((sw + 7) / 8 * 8, 0);
+  // Slot k in 0..3 (3 = neutral); pointers at column 0 of the padded rows.
+  auto prepared = [&](int k) {
+    float* base = s.prepared.data() + static_cast<std::size_t>(k) * 4 * pw + 1;
+    return Prepared{base, base + pw, base + 2 * pw, base + 3 * pw};
   };
-  const RowSums neutral = slot(3);
-  std::fill(neutral.n, neutral.n + sw, 0.0f);
-  std::fill(neutral.sum, neutral.sum + sw, 0.0f);
-  std::fill(neutral.sum2, neutral.sum2 + sw, 0.0f);
-  std::fill(neutral.lo, neutral.lo + sw, kInf);
-  std::fill(neutral.hi, neutral.hi + sw, -kInf);
-  for (auto* v : {&s.ca, &s.cw, &s.clo, &s.chi}) v->assign(sw + 2, 0.0f);
-  float* ca = s.ca.data();
-  float* cw = s.cw.data();
-  float* clo = s.clo.data();
-  float* chi = s.chi.data();
-  clo[0] = clo[w + 1] = kInf;
-  chi[0] = chi[w + 1] = -kInf;
+  auto lo_of = [&](int k) { return s.minmax.data() + static_cast<std::size_t>(k) * 2 * sw; };
+  auto hi_of = [&](int k) { return lo_of(k) + sw; };
+  for (int k = 0; k < 4; ++k) {
+    const Prepared p = prepared(k);
+    // Pads (and the whole neutral row): weight 0, amplitude 0, distances that never win.
+    const int first = k == 3 ? -1 : w, last = w;
+    for (int c = -1; c <= last; ++c) {
+      if (k != 3 && c >= 0 && c < first) continue;
+      p.w[c] = 0.0f;
+      p.a[c] = 0.0f;
+      p.lo[c] = kInf;
+      p.hi[c] = -kInf;
+    }
+  }
+  std::fill(lo_of(3), lo_of(3) + sw, kInf);
+  std::fill(hi_of(3), hi_of(3) + sw, -kInf);
   const PixelFlags* prior_px = PriorOrZeros(prior, frame.radial_distance_m.size());
+  auto sums_of = [&](int k) { return s.sums.data() + static_cast<std::size_t>(k) * 3 * sw; };
+  int sums_row[3] = {-1, -1, -1};  // the row whose sums slot k holds
+  // Slot k's sums for row r (k = 3: the neutral row), computed once per row when first needed.
+  auto sums = [&](int k, int r) {
+    float* n = sums_of(k);
+    if (k != 3 && sums_row[k] != r) {
+      const Prepared p = prepared(k);
+      HorizontalSums(w, p.w, p.a, n, n + sw, n + 2 * sw);
+      sums_row[k] = r;
+    }
+    return n;
+  };
 
-  auto sums_of_row = [&](int r) {
-    const RowSums out_row = slot(r % 3);
+  auto prepare_row = [&](int r) {
+    const Prepared p = prepared(r % 3);
     PrepareRow(w, frame.radial_distance_m.Row(r).data(), frame.amplitude.Row(r).data(),
-               prior_px + static_cast<std::size_t>(r) * sw, cw, ca, clo, chi);
-    HorizontalSums(w, cw, ca, clo, chi, out_row.n, out_row.sum, out_row.sum2, out_row.lo,
-                   out_row.hi);
+               prior_px + static_cast<std::size_t>(r) * sw, p.w, p.a, p.lo, p.hi);
+    HorizontalMinMax(w, p.lo, p.hi, lo_of(r % 3), hi_of(r % 3));
   };
 
   const Thresholds t{
       static_cast<float>(o.min_amplitude_contrast), static_cast<float>(o.amplitude_mean_floor),
       static_cast<float>(o.min_close_delta_m),      static_cast<float>(o.min_far_delta_m),
       static_cast<float>(o.min_max_delta_m),        static_cast<float>(o.min_avg_delta_m)};
-  sums_of_row(0);
+  const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
+  std::uint8_t* candidate = s.candidate.data();
+  prepare_row(0);
   for (int r = 0; r < h; ++r) {
-    if (r + 1 < h) sums_of_row(r + 1);
-    const RowSums u = r > 0 ? slot((r - 1) % 3) : neutral;
-    const RowSums m = slot(r % 3);
-    const RowSums v = r + 1 < h ? slot((r + 1) % 3) : neutral;
-    Decide(w, t, u.n, m.n, v.n, u.sum, m.sum, v.sum, u.sum2, m.sum2, v.sum2, u.lo, m.lo, v.lo, u.hi,
-           m.hi, v.hi, frame.radial_distance_m.Row(r).data(), frame.amplitude.Row(r).data(),
-           prior_px + static_cast<std::size_t>(r) * sw, out.Row(r).data());
+    if (r + 1 < h) prepare_row(r + 1);
+    const int ku = r > 0 ? (r - 1) % 3 : 3, km = r % 3, kv = r + 1 < h ? (r + 1) % 3 : 3;
+    const Prepared u = prepared(ku), m = prepared(km), v = prepared(kv);
+    DistanceCandidates(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv),
+                       frame.radial_distance_m.Row(r).data(), m.w, candidate);
+    PixelFlags* f = out.Row(r).data();
+    const std::size_t count = CountCandidates(w, candidate);
+    if (count == 0) continue;
+    if (16 * count > sw) {
+      // Many candidates (noisy, unfiltered input): the vectorised test of the whole row.
+      const float* nu = sums(ku, r - 1);
+      const float* nm = sums(km, r);
+      const float* nv = sums(kv, r + 1);
+      ContrastRow(w, t, nu, nm, nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw,
+                  nv + 2 * sw, candidate, f);
+      continue;
+    }
+    // Few candidates: test them one by one, skipping eight non-candidates at a time.
+    for (int c0 = 0; c0 < w; c0 += 8) {
+      std::uint64_t word;
+      std::memcpy(&word, candidate + c0, sizeof word);
+      if (word == 0) continue;
+      for (int c = c0; c < std::min(c0 + 8, w); ++c) {
+        if (candidate[c] != 0 && HighContrast(c, t, u, m, v)) f[c] |= PixelFlags(bit);
+      }
+    }
   }
 }
 

@@ -214,22 +214,31 @@ TOFCAM_HOT_LOOP void DistanceRange(std::size_t n, const float* __restrict d,
                                    const PixelFlags* __restrict pf, Range& out) {
   using namespace simd;
   constexpr float kInf = std::numeric_limits<float>::infinity();
-  F8 lo = kInf - F8{}, hi = -kInf - F8{};
-  I8 count = {};
+  // Two independent accumulator sets (see RayRange).
+  F8 lo[2], hi[2];
+  I8 count[2] = {};
+  for (int k = 0; k < 2; ++k) {
+    lo[k] = kInf - F8{};
+    hi[k] = -kInf - F8{};
+  }
   std::size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    const F8 x = LoadF8(d + i);
-    const I8 usable = (x > 0.0f) & (x < kInf) & ((LoadFlags8(pf + i) & kRejectMask) == 0);
-    lo = (usable & (x < lo)) ? x : lo;
-    hi = (usable & (x > hi)) ? x : hi;
-    count -= usable;  // masks are -1
+  for (; i + 16 <= n; i += 16) {
+    for (int k = 0; k < 2; ++k) {
+      const F8 x = LoadF8(d + i + 8 * k);
+      const I8 usable = (x > 0.0f) & (x < kInf) & ((LoadFlags8(pf + i + 8 * k) & kRejectMask) == 0);
+      lo[k] = (usable & (x < lo[k])) ? x : lo[k];
+      hi[k] = (usable & (x > hi[k])) ? x : hi[k];
+      count[k] -= usable;  // masks are -1
+    }
   }
   float l = kInf, h = -kInf;
   std::size_t c = 0;
-  for (int j = 0; j < 8; ++j) {
-    l = std::min(l, lo[j]);
-    h = std::max(h, hi[j]);
-    c += static_cast<std::size_t>(count[j]);
+  for (int k = 0; k < 2; ++k) {
+    for (int j = 0; j < 8; ++j) {
+      l = std::min(l, lo[k][j]);
+      h = std::max(h, hi[k][j]);
+      c += static_cast<std::size_t>(count[k][j]);
+    }
   }
   for (; i < n; ++i) {
     const bool usable = (d[i] > 0.0f) & (d[i] < kInf) & ((pf[i].bits() & kRejectMask) == 0);
@@ -242,21 +251,30 @@ TOFCAM_HOT_LOOP void DistanceRange(std::size_t n, const float* __restrict d,
   out = {l, h, c};
 }
 
-// Range of one ray component (finite by construction of a ray table).
+// Range of one ray component (finite by construction of a ray table). Four independent
+// accumulator pairs: one pair would chain every min / max on the previous one's latency.
 TOFCAM_HOT_LOOP void RayRange(std::size_t n, const float* __restrict r, Range& out) {
   using namespace simd;
   constexpr float kInf = std::numeric_limits<float>::infinity();
-  F8 lo = kInf - F8{}, hi = -kInf - F8{};
+  F8 lo[4], hi[4];
+  for (int k = 0; k < 4; ++k) {
+    lo[k] = kInf - F8{};
+    hi[k] = -kInf - F8{};
+  }
   std::size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    const F8 x = LoadF8(r + i);
-    lo = x < lo ? x : lo;
-    hi = x > hi ? x : hi;
+  for (; i + 32 <= n; i += 32) {
+    for (int k = 0; k < 4; ++k) {
+      const F8 x = LoadF8(r + i + 8 * k);
+      lo[k] = x < lo[k] ? x : lo[k];
+      hi[k] = x > hi[k] ? x : hi[k];
+    }
   }
   float l = kInf, h = -kInf;
-  for (int j = 0; j < 8; ++j) {
-    l = std::min(l, lo[j]);
-    h = std::max(h, hi[j]);
+  for (int k = 0; k < 4; ++k) {
+    for (int j = 0; j < 8; ++j) {
+      l = std::min(l, lo[k][j]);
+      h = std::max(h, hi[k][j]);
+    }
   }
   for (; i < n; ++i) {
     l = std::min(l, r[i]);
@@ -303,6 +321,30 @@ TOFCAM_HOT_LOOP void DirectIndex(std::size_t n, float inv_voxel, const Box& box,
   }
 }
 
+// DirectIndex for boxes of fewer than 2^24 cells: the same cells with the index computed in
+// float, exact there (every intermediate is an integer below 2^24), and floor as one rounding
+// instruction instead of integer multiplies (slow in AVX2) and conversions back and forth.
+TOFCAM_HOT_LOOP void DirectIndexFloat(std::size_t n, float inv_voxel, const Box& box, float dx,
+                                      float dy, std::int32_t dummy, const float* __restrict d,
+                                      const float* __restrict rx, const float* __restrict ry,
+                                      const float* __restrict rz, const PixelFlags* __restrict pf,
+                                      std::int32_t* __restrict idx) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  const float x0 = static_cast<float>(box.x0), y0 = static_cast<float>(box.y0);
+  const float z0 = static_cast<float>(box.z0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool usable = (d[i] > 0.0f) & (d[i] < kInf) & ((pf[i].bits() & kRejectMask) == 0);
+    // Unusable points are moved to the box corner first, so the conversion stays in range.
+    const float s = usable ? d[i] * inv_voxel : 0.0f;
+    const float x = usable ? __builtin_floorf(s * rx[i]) - x0 : 0.0f;
+    const float y = usable ? __builtin_floorf(s * ry[i]) - y0 : 0.0f;
+    const float z = usable ? __builtin_floorf(s * rz[i]) - z0 : 0.0f;
+    const std::int32_t linear = static_cast<std::int32_t>((z * dy + y) * dx + x);
+    const std::int32_t m = -static_cast<std::int32_t>(usable);
+    idx[i] = (linear & m) | (dummy & ~m);
+  }
+}
+
 struct DenseScratch {
   std::vector<std::int32_t> idx;
   std::vector<std::int32_t> touched;
@@ -328,12 +370,16 @@ std::size_t CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::
                         std::uint32_t* __restrict counts, std::int32_t* __restrict touched) {
   const std::uint64_t pair = DummyPair(dummy);
   std::size_t m = 0;
+  // Branch-free inside a block, as in CountDense: usable and unusable pixels interleave at random
+  // after the other filters, so "skip the unusable one" would mispredict about every other pixel.
+  // Unusable points count into one of four dummy cells (by position, so no long chain).
   auto add = [&](std::size_t p) {
-    const std::int32_t c = idx[p];
-    if (c == dummy) return;
+    std::int32_t c = idx[p];
+    c = c == dummy ? dummy + static_cast<std::int32_t>(p & 3) : c;
+    const std::uint32_t before = counts[c];
     touched[m] = c;
-    m += counts[c] == 0 ? 1 : 0;
-    ++counts[c];
+    m += before == 0 ? 1 : 0;
+    counts[c] = before + 1;
   };
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
@@ -374,7 +420,7 @@ void CountAndFlag(std::size_t n, std::size_t usable, std::int32_t cells, std::ui
     d.counts.assign(static_cast<std::size_t>(cells) + 4, 0);
   }
   std::size_t touched = 0;
-  if (4 * usable < n) {
+  if (8 * usable < n) {
     touched = CountSparse(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
     FlagSparse(n, d.idx.data(), cells, d.counts.data(), min_points, out);
   } else {
@@ -431,9 +477,15 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
                       box.x1 <= kInside && box.y1 <= kInside && box.z1 <= kInside;
   if (inside && BoxFits(box, limit, cells)) {
     dense.idx.resize(n);
-    DirectIndex(n, inv_voxel, box, box.x1 - box.x0 + 1, box.y1 - box.y0 + 1,
-                static_cast<std::int32_t>(cells), d, rays.x.data(), rays.y.data(), rays.z.data(),
-                pf, dense.idx.data());
+    if (cells < (std::int64_t{1} << 24)) {
+      DirectIndexFloat(n, inv_voxel, box, static_cast<float>(box.x1 - box.x0 + 1),
+                       static_cast<float>(box.y1 - box.y0 + 1), static_cast<std::int32_t>(cells), d,
+                       rays.x.data(), rays.y.data(), rays.z.data(), pf, dense.idx.data());
+    } else {
+      DirectIndex(n, inv_voxel, box, box.x1 - box.x0 + 1, box.y1 - box.y0 + 1,
+                  static_cast<std::int32_t>(cells), d, rays.x.data(), rays.y.data(), rays.z.data(),
+                  pf, dense.idx.data());
+    }
     CountAndFlag(n, dr.count, static_cast<std::int32_t>(cells), min_points, dense, out.data());
     return;
   }

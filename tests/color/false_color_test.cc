@@ -2,9 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <random>
 
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
@@ -140,6 +142,66 @@ TEST(FalseColorTest, AmplitudeShadingLaw) {
   EXPECT_EQ(img[1], (Rgb8{159, 159, 0}));  // 0.625 * 255 = 159.375
   EXPECT_EQ(img[2], (Rgb8{64, 64, 0}));    // 0.25 * 255 = 63.75
   EXPECT_EQ(img[3], (Rgb8{255, 255, 0}));
+}
+
+TEST(FalseColorTest, EveryPixelFollowsTheLawOnWideRandomFrames) {
+  // 53 x 3 pixels (rows of several vector widths plus a tail) with distances inside and outside
+  // the range, NaN, ±inf, rejected pixels and amplitudes including NaN and negatives; shading and
+  // black-outside on and off. Reference: the law of the header in double. Channels may differ by
+  // 1 where the float evaluation of t rounds across a half; invisible pixels are exactly black.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  const int w = 53, h = 3;
+  MetricFrame f;
+  f.radial_distance_m = Image<float>(w, h);
+  f.amplitude = Image<float>(w, h);
+  f.flags = Image<PixelFlags>(w, h);
+  f.info.modulation_frequency_hz = 20e6;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+    const float x = u(rng);
+    f.radial_distance_m[i] = x < 0.05f   ? nan
+                             : x < 0.08f ? inf
+                             : x < 0.1f  ? -inf
+                                         : -1.0f + 10.0f * u(rng);
+    const float y = u(rng);
+    f.amplitude[i] = y < 0.05f ? nan : y < 0.1f ? -5.0f : 12000.0f * u(rng);
+    if (u(rng) < 0.1f) f.flags[i] = Flag::kSaturated;
+  }
+  for (const bool shade : {false, true}) {
+    for (const bool black : {false, true}) {
+      FalseColorOptions o;
+      o.near_m = 0.5;
+      o.far_m = 6.0;
+      o.amplitude_shading = shade;
+      o.out_of_range_black = black;
+      const Image<Rgb8> img = FalseColor(f, o);
+      int visible_count = 0;
+      for (std::size_t i = 0; i < img.size(); ++i) {
+        const double d = f.radial_distance_m[i];
+        const double t_raw = (d - o.near_m) / (o.far_m - o.near_m);
+        const bool in_range = t_raw >= 0.0 && t_raw <= 1.0;
+        const bool visible = std::isfinite(d) && f.flags[i].bits() == 0 && (in_range || !black);
+        if (!visible) {
+          EXPECT_EQ(img[i], (Rgb8{0, 0, 0})) << i;
+          continue;
+        }
+        ++visible_count;
+        const double t = std::clamp(t_raw, 0.0, 1.0);
+        const double a = std::isnan(f.amplitude[i]) ? 0.0 : std::max<double>(f.amplitude[i], 0.0);
+        const double v = shade ? o.shading_min_value +
+                                     (1.0 - o.shading_min_value) *
+                                         std::min(1.0, std::sqrt(a / o.shading_reference_amplitude))
+                               : 1.0;
+        auto q = [&](double c) { return std::floor(255.0 * v * std::clamp(c, 0.0, 1.0) + 0.5); };
+        EXPECT_NEAR(img[i].r, q(3.0 - 3.0 * t), 1.0) << i;
+        EXPECT_NEAR(img[i].g, q(1.0 - 3.0 * t), 1.0) << i;
+        EXPECT_NEAR(img[i].b, q(3.0 * t - 1.0), 1.0) << i;
+      }
+      EXPECT_GT(visible_count, w * h / 4);  // about 40 % with black outside
+    }
+  }
 }
 
 TEST(FalseColorTest, ErrorsAreReported) {

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <random>
 
 #include "test_scene.h"
 #include "tofcam/core/error.h"
@@ -87,6 +89,102 @@ TEST(FlyingPixelFilterTest, SmoothSceneKeepsInteriorPixels) {
       }
     }
   }
+}
+
+// The rule of the header evaluated literally per pixel, in double, over the usable pixels of the
+// window. 1 / 0 = flagged or not; -1 = within 1e-4 (relative) of a threshold, where float and
+// double may legitimately disagree.
+int ReferenceRule(const MetricFrame& f, int r, int c, const FlyingPixelOptions& o) {
+  auto usable = [&](int y, int x) {
+    return std::isfinite(f.radial_distance_m(y, x)) && std::isfinite(f.amplitude(y, x)) &&
+           (f.flags(y, x).bits() & kRejectMask) == 0;
+  };
+  if (!usable(r, c)) return 0;
+  double n = 0, sum = 0, sum2 = 0;
+  double dmin = std::numeric_limits<double>::infinity(), dmax = -dmin;
+  for (int y = std::max(r - 1, 0); y <= std::min(r + 1, f.height() - 1); ++y) {
+    for (int x = std::max(c - 1, 0); x <= std::min(c + 1, f.width() - 1); ++x) {
+      if (!usable(y, x)) continue;
+      const double a = f.amplitude(y, x), d = f.radial_distance_m(y, x);
+      n += 1;
+      sum += a;
+      sum2 += a * a;
+      dmin = std::min(dmin, d);
+      dmax = std::max(dmax, d);
+    }
+  }
+  const double d = f.radial_distance_m(r, c);
+  const double to_min = d - dmin, to_max = dmax - d;
+  const double var = std::max(sum2 / n - (sum / n) * (sum / n), 0.0);
+  const double contrast = std::sqrt(var) / std::max(sum / n, o.amplitude_mean_floor);
+  const double margins[] = {contrast / o.min_amplitude_contrast - 1.0, to_min - o.min_close_delta_m,
+                            to_max - o.min_far_delta_m,
+                            std::max(to_min, to_max) - o.min_max_delta_m,
+                            0.5 * (to_min + to_max) - o.min_avg_delta_m};
+  bool all = true;
+  bool near = false;
+  for (int k = 0; k < 5; ++k) {
+    // Contrast exactly at its threshold counts as passing (>=); the distance tests are strict.
+    const bool pass = k == 0 ? margins[k] >= 0 : margins[k] > 0;
+    all &= pass;
+    near |= std::abs(margins[k]) < 1e-4;
+  }
+  return near ? -1 : (all ? 1 : 0);
+}
+
+TEST(FlyingPixelFilterTest, MatchesTheRuleOnNoisyFramesWithFewAndManyCandidates) {
+  // 97 x 61 (odd sizes: no row is a multiple of the vector width). Top rows: a plane with
+  // millimetre noise and a step edge (few candidates per row, tested one by one); bottom rows:
+  // 10 cm noise over 1-4 m (a candidate at many pixels, the row tested whole). Random rejected
+  // pixels, NaN and infinite distances and amplitudes throughout.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::normal_distribution<float> noise(0.0f, 1.0f);
+  const int w = 97, h = 61;
+  MetricFrame f;
+  f.radial_distance_m = Image<float>(w, h);
+  f.amplitude = Image<float>(w, h);
+  f.flags = Image<PixelFlags>(w, h);
+  for (int r = 0; r < h; ++r) {
+    for (int c = 0; c < w; ++c) {
+      float d = 0.0f;
+      if (r < h / 2) {
+        d = (c < w / 2 ? 1.5f : 2.5f) + 0.002f * noise(rng);
+      } else {
+        d = 1.0f + 3.0f * u(rng) * 0.5f + 0.1f * noise(rng);
+      }
+      // Top rows: a mixed pixel half-way across the step on every other row; in the rows
+      // of blocks 12k..12k+5 the amplitude is flat (no contrast: candidates that must fail),
+      // elsewhere 1/d².
+      const bool top = r < h / 2 - 2;
+      if (top && c == w / 2 && r % 2 == 0) d = 2.0f;
+      f.radial_distance_m(r, c) = d;
+      f.amplitude(r, c) = top && (r / 6) % 2 == 0 ? 1000.0f * (1.0f + 0.002f * noise(rng))
+                                                  : 4000.0f / (d * d) * (1.0f + 0.2f * noise(rng));
+      const float x = top && c == w / 2 ? 1.0f : u(rng);
+      if (x < 0.03f) f.radial_distance_m(r, c) = std::numeric_limits<float>::quiet_NaN();
+      if (x > 0.03f && x < 0.04f) f.amplitude(r, c) = std::numeric_limits<float>::infinity();
+      if (x > 0.04f && x < 0.10f) f.flags(r, c) = Flag::kHighDeltaL;
+    }
+  }
+  const FlyingPixelOptions o;
+  const Image<PixelFlags> out = FlyingPixelFilter(f, o);
+  int flagged_top = 0, flagged_bottom = 0, compared = 0, candidates_top = 0;
+  for (int r = 0; r < h; ++r) {
+    for (int c = 0; c < w; ++c) {
+      const int expected = ReferenceRule(f, r, c, o);
+      if (expected < 0) continue;
+      ++compared;
+      EXPECT_EQ(out(r, c).Has(Flag::kFlyingPixel), expected == 1) << r << "," << c;
+      (r < h / 2 - 2 ? flagged_top : flagged_bottom) += expected;
+      candidates_top += r < h / 2 - 2 && c == w / 2 && r % 2 == 0;
+    }
+  }
+  // Both regimes really occur (the test would prove little otherwise).
+  EXPECT_GT(compared, w * h * 99 / 100);
+  EXPECT_GT(flagged_top, 0);
+  EXPECT_LT(flagged_top, candidates_top);  // some top candidates fail the contrast test
+  EXPECT_GT(flagged_bottom, w * (h / 2) / 10);
 }
 
 TEST(FlyingPixelFilterTest, ErrorsAreReported) {
