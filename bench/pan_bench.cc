@@ -10,14 +10,20 @@
 
 namespace {
 
-void BM_MakePanView(benchmark::State& state) {
-  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+std::vector<tofcam::MetricFrame> PanFrames(const tofcam::bench::SimulatedInput& in) {
   std::vector<tofcam::MetricFrame> frames;
   for (int i = 0; i < 5; ++i) {
     tofcam::MetricFrame f = in.ready[static_cast<std::size_t>(i) % in.ready.size()];
     f.info.pan_angle_rad = (-60.0 + 30.0 * i) * tofcam::kPi / 180.0;
     frames.push_back(std::move(f));
   }
+  return frames;
+}
+
+// A fresh view per call (allocation and page faults included).
+void BM_MakePanView(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  const std::vector<tofcam::MetricFrame> frames = PanFrames(in);
   for (auto _ : state) {
     tofcam::PanView view = tofcam::MakePanView(frames, in.rays, {});
     benchmark::DoNotOptimize(view.panorama.data());
@@ -25,5 +31,18 @@ void BM_MakePanView(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * 5 * state.range(0) * state.range(1));
 }
 BENCHMARK(BM_MakePanView)->Apply(tofcam::bench::Resolutions)->Unit(benchmark::kMillisecond);
+
+// The view reused from sweep to sweep (MakePanViewInto), as a robot's loop does.
+void BM_MakePanViewInto(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  const std::vector<tofcam::MetricFrame> frames = PanFrames(in);
+  tofcam::PanView view;
+  for (auto _ : state) {
+    tofcam::MakePanViewInto(frames, in.rays, {}, view);
+    benchmark::DoNotOptimize(view.panorama.data());
+  }
+  state.SetItemsProcessed(state.iterations() * 5 * state.range(0) * state.range(1));
+}
+BENCHMARK(BM_MakePanViewInto)->Apply(tofcam::bench::Resolutions)->Unit(benchmark::kMillisecond);
 
 }  // namespace

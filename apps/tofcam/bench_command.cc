@@ -139,6 +139,7 @@ struct Workspace {
   MetricFrame metric;
   Image<float> delta_l;
   Image<PixelFlags> raised;  // filter output, reused (ApplyFiltersInto)
+  PanView pan_view;          // reused (MakePanViewInto), as a per-sweep loop does
   Image<float> smoothed;     // SpatialFilterInto output
   MetricFrame temporal_frame;
   std::optional<TemporalFilter> temporal;
@@ -366,8 +367,8 @@ std::vector<Stage> MakeStages() {
   // Five frames at -60..60 degrees into the 180-degree cloud and panorama; per input frame.
   s.push_back(
       {"pan assembly (5 frames)", 4 + 4 + 2 + 12 + 16, 5, true, [](Workspace& ws, std::size_t) {
-         const PanView v = MakePanView(ws.pan_frames, ws.input->rays, {});
-         Sink(ws, v.panorama.data());
+         MakePanViewInto(ws.pan_frames, ws.input->rays, {}, ws.pan_view);
+         Sink(ws, ws.pan_view.panorama.data());
        }});
   // The issue-4 target: metric + calibration (with the table) + ΔL + threshold + point cloud,
   // fused into one pass (PaperChain), on frames as a camera delivers them (no ground truth).

@@ -228,6 +228,14 @@ Rgb8 FalseColorOfDistance(double distance_m, double near_m, double far_m) {
 Image<Rgb8> FalseColorImage(const Image<float>& distance_m, const Image<PixelFlags>& flags,
                             const Image<float>& amplitude, double far_default_m,
                             const FalseColorOptions& o) {
+  Image<Rgb8> out;
+  FalseColorImageInto(distance_m, flags, amplitude, far_default_m, o, out);
+  return out;
+}
+
+void FalseColorImageInto(const Image<float>& distance_m, const Image<PixelFlags>& flags,
+                         const Image<float>& amplitude, double far_default_m,
+                         const FalseColorOptions& o, Image<Rgb8>& out) {
   o.Validate();
   const int w = distance_m.width(), h = distance_m.height();
   if (distance_m.empty()) {
@@ -254,7 +262,7 @@ Image<Rgb8> FalseColorImage(const Image<float>& distance_m, const Image<PixelFla
                      static_cast<float>(1.0 / o.shading_reference_amplitude),
                      o.out_of_range_black,
                      o.amplitude_shading};
-  Image<Rgb8> out(w, h);
+  if (!out.SameSize(w, h)) out = Image<Rgb8>(w, h);
   thread_local std::vector<std::uint8_t> planes;
   thread_local std::vector<float> zero_amplitude;
   thread_local std::vector<PixelFlags> zero_flags;
@@ -271,7 +279,6 @@ Image<Rgb8> FalseColorImage(const Image<float>& distance_m, const Image<PixelFla
     static_assert(sizeof(Rgb8) == 3);
     Interleave(w, r, g, b, reinterpret_cast<std::uint8_t*>(out.Row(row).data()));
   }
-  return out;
 }
 
 Image<Rgb8> FalseColor(const MetricFrame& frame, const FalseColorOptions& options) {

@@ -120,23 +120,39 @@ TOFCAM_HOT_LOOP void DistanceCandidates(int w, const Thresholds& t, const float*
   return var_n2 >= lim * lim;
 }
 
-// The contrast test over a whole row (rows u, m, v of horizontal sums), for rows with many
-// candidates; flags the candidates that pass it.
-TOFCAM_HOT_LOOP void ContrastRow(int w, const Thresholds& t, const float* __restrict nu,
-                                 const float* __restrict nm, const float* __restrict nv,
-                                 const float* __restrict su, const float* __restrict sm,
-                                 const float* __restrict sv, const float* __restrict qu,
-                                 const float* __restrict qm, const float* __restrict qv,
-                                 const std::uint8_t* __restrict candidate,
-                                 PixelFlags* __restrict f) {
+// The whole rule over a row in one pass (3-min / 3-max rows lu..hv, horizontal sums nu..qv, the
+// mid row's weights cw), for rows with many candidates; ORs the flag into f and returns the
+// number of pixels that passed the distance conditions (to choose the next row's form).
+TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float* __restrict lu,
+                                        const float* __restrict lm, const float* __restrict lv,
+                                        const float* __restrict hu, const float* __restrict hm,
+                                        const float* __restrict hv, const float* __restrict d,
+                                        const float* __restrict cw, const float* __restrict nu,
+                                        const float* __restrict nm, const float* __restrict nv,
+                                        const float* __restrict su, const float* __restrict sm,
+                                        const float* __restrict sv, const float* __restrict qu,
+                                        const float* __restrict qm, const float* __restrict qv,
+                                        PixelFlags* __restrict f) {
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
+  const float close = t.close, far = t.far, max_delta = t.max_delta, avg_delta = t.avg_delta;
+  std::uint32_t count = 0;
   for (int c = 0; c < w; ++c) {
-    const unsigned pass =
-        static_cast<unsigned>(candidate[c]) &
-        static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
-                                              qu[c] + qm[c] + qv[c], t));
-    f[c] |= PixelFlags(static_cast<std::uint16_t>(pass * bit));
+    const float dmin = std::min(std::min(lu[c], lm[c]), lv[c]);
+    const float dmax = std::max(std::max(hu[c], hm[c]), hv[c]);
+    const float dc = d[c];
+    const float to_min = dc - dmin, to_max = dmax - dc;
+    const unsigned pass = static_cast<unsigned>(cw[c] != 0.0f) &
+                          static_cast<unsigned>(to_min > close) &
+                          static_cast<unsigned>(to_max > far) &
+                          static_cast<unsigned>(std::max(to_min, to_max) > max_delta) &
+                          static_cast<unsigned>(0.5f * (to_min + to_max) > avg_delta);
+    count += pass;
+    const unsigned flying =
+        pass & static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
+                                                     qu[c] + qm[c] + qv[c], t));
+    f[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
   }
+  return count;
 }
 
 // Number of candidates in a row (candidate[c] is 0 or 1).
@@ -221,22 +237,33 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
   std::uint8_t* candidate = s.candidate.data();
   prepare_row(0);
+  bool dense = false;  // the previous row had many candidates
   for (int r = 0; r < h; ++r) {
     if (r + 1 < h) prepare_row(r + 1);
     const int ku = r > 0 ? (r - 1) % 3 : 3, km = r % 3, kv = r + 1 < h ? (r + 1) % 3 : 3;
     const Prepared u = prepared(ku), m = prepared(km), v = prepared(kv);
-    DistanceCandidates(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv),
-                       frame.radial_distance_m.Row(r).data(), m.w, candidate);
+    const float* d = frame.radial_distance_m.Row(r).data();
     PixelFlags* f = out.Row(r).data();
-    const std::size_t count = CountCandidates(w, candidate);
-    if (count == 0) continue;
-    if (16 * count > sw) {
-      // Many candidates (noisy, unfiltered input): the vectorised test of the whole row.
+    // Many candidates (noisy, unfiltered input): the whole rule in one vectorised pass.
+    auto decide_row = [&] {
       const float* nu = sums(ku, r - 1);
       const float* nm = sums(km, r);
       const float* nv = sums(kv, r + 1);
-      ContrastRow(w, t, nu, nm, nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw,
-                  nv + 2 * sw, candidate, f);
+      const std::size_t count = DecideRow(
+          w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv), d, m.w, nu, nm,
+          nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw, nv + 2 * sw, f);
+      dense = 16 * count > sw;
+    };
+    if (dense) {
+      decide_row();
+      continue;
+    }
+    DistanceCandidates(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv), d,
+                       m.w, candidate);
+    const std::size_t count = CountCandidates(w, candidate);
+    if (count == 0) continue;
+    if (16 * count > sw) {
+      decide_row();
       continue;
     }
     // Few candidates: test them one by one, skipping eight non-candidates at a time.

@@ -1,13 +1,13 @@
 #include "tofcam/pan/pan_view.h"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "../core/fast_atan2.h"
 #include "../filters/hot_loop.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/pixel_flags.h"
@@ -19,41 +19,8 @@ namespace {
 constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 constexpr double kDeg = kPi / 180.0;
 
-// a where c, else b, by bit masks: GCC turns a ternary into a branch here and keeps the loop
-// scalar (the branches on the octant are unpredictable).
-inline double Sel(bool c, double a, double b) {
-  const std::uint64_t m = 0 - static_cast<std::uint64_t>(c);
-  return std::bit_cast<double>((std::bit_cast<std::uint64_t>(a) & m) |
-                               (std::bit_cast<std::uint64_t>(b) & ~m));
-}
-
-// atan2(y, x) in [-pi, pi] without libm, branch-free so the per-point loop vectorises: octant
-// reduction to atan(u), |u| <= tan(pi/8), by its Taylor series to u^21 (error below
-// u^23/23 < 1e-10 rad, a millionth of the smallest panorama cell). atan2(0, 0) = 0.
-inline double FastAtan2(double y, double x) {
-  constexpr double kTanPi8 = 0.41421356237309504880;
-  const double ax = std::abs(x), ay = std::abs(y);
-  const double hi = std::max(ax, ay), lo = std::min(ax, ay);
-  const double t = lo / std::max(hi, 1e-300);
-  const bool reduce = t > kTanPi8;
-  const double u = Sel(reduce, (t - 1.0) / (t + 1.0), t);
-  const double u2 = u * u;
-  double p = 1.0 / 21;
-  p = p * u2 - 1.0 / 19;
-  p = p * u2 + 1.0 / 17;
-  p = p * u2 - 1.0 / 15;
-  p = p * u2 + 1.0 / 13;
-  p = p * u2 - 1.0 / 11;
-  p = p * u2 + 1.0 / 9;
-  p = p * u2 - 1.0 / 7;
-  p = p * u2 + 1.0 / 5;
-  p = p * u2 - 1.0 / 3;
-  p = p * u2 + 1.0;
-  double a = Sel(reduce, kPi / 4, 0.0) + u * p;
-  a = Sel(ay > ax, kPi / 2 - a, a);
-  a = Sel(x < 0.0, kPi - a, a);
-  return Sel(y < 0.0, -a, a);
-}
+using internal::FastAtan2;
+using internal::Sel;
 
 // Geometry of the panorama for the per-point loop.
 struct Strip {
@@ -129,6 +96,51 @@ struct Scratch {
   }
 };
 
+// Appends points [0, n) of one frame at `n_out` of the merged cloud (its arrays sized for every
+// point of every frame): each point is written, the end advances past the kept ones (valid, or
+// all with keep_all = 1). Returns the new end. Separate, with restrict pointers, so the compiler
+// keeps every pointer in a register (through the vectors it reloads them after each store).
+std::size_t AppendPoints(std::size_t n, std::uint8_t keep_all, const float* __restrict bx,
+                         const float* __restrict by, const float* __restrict bz,
+                         const float* __restrict a, const float* __restrict in,
+                         const float* __restrict dl, const PixelFlags* __restrict f,
+                         const std::uint8_t* __restrict valid, std::size_t n_out, PointCloud& out) {
+  float* __restrict ox = out.x.data();
+  float* __restrict oy = out.y.data();
+  float* __restrict oz = out.z.data();
+  float* __restrict oa = out.amplitude.data();
+  float* __restrict oi = out.intensity.data();
+  float* __restrict od = out.delta_l_m.data();
+  PixelFlags* __restrict of = out.flags.data();
+  for (std::size_t i = 0; i < n; ++i) {
+    ox[n_out] = bx[i];
+    oy[n_out] = by[i];
+    oz[n_out] = bz[i];
+    oa[n_out] = a[i];
+    oi[n_out] = in[i];
+    od[n_out] = dl[i];
+    of[n_out] = f[i];
+    n_out += static_cast<std::size_t>(valid[i] | keep_all);
+  }
+  return n_out;
+}
+
+// Splat: the point nearest to the rotation centre wins its cell (the first of equals). Every
+// point rewrites a cell with selects (points compete for cells in an order no branch predictor
+// learns); points outside the strip (cell -1) rewrite cell 0 with its own values.
+void Splat(std::size_t n, const std::int32_t* __restrict cell, const float* __restrict range,
+           const float* __restrict d, const float* __restrict a, float* __restrict zb,
+           float* __restrict pano_d, float* __restrict pano_a) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool inside = cell[i] >= 0;
+    const std::int32_t c = inside ? cell[i] : 0;
+    const bool nearer = inside & (range[i] < zb[c]);
+    zb[c] = nearer ? range[i] : zb[c];
+    pano_d[c] = nearer ? d[i] : pano_d[c];
+    pano_a[c] = nearer ? a[i] : pano_a[c];
+  }
+}
+
 }  // namespace
 
 void PanViewOptions::Validate() const {
@@ -180,9 +192,15 @@ PointCloud TransformPointCloud(const PointCloud& cloud, const Eigen::Isometry3d&
 
 PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
                     const PanViewOptions& o) {
+  PanView view;
+  MakePanViewInto(frames, rays, o, view);
+  return view;
+}
+
+void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
+                     const PanViewOptions& o, PanView& view) {
   o.Validate();
   if (frames.empty()) throw Error(ErrorCode::kInvalidArgument, "pan view: no frames");
-  PanView view;
   view.resolution_rad = o.resolution_deg * kDeg;
   view.max_azimuth_rad = o.max_azimuth_deg * kDeg;
   view.max_tan_elevation = std::tan(o.max_elevation_deg * kDeg);
@@ -190,9 +208,21 @@ PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
       std::ceil((o.max_azimuth_deg - o.min_azimuth_deg) / o.resolution_deg - 1e-9));
   const int rows =
       static_cast<int>(std::ceil(2.0 * view.max_tan_elevation / view.resolution_rad - 1e-9));
-  view.panorama_distance_m = Image<float>(cols, rows, kNan);
-  view.panorama_amplitude = Image<float>(cols, rows, kNan);
-  Image<float> zbuffer(cols, rows, std::numeric_limits<float>::infinity());
+  // Reused storage: the previous view's images and a per-thread z-buffer (a fresh 100 KB+ image
+  // per call is a fresh mapping from the kernel, page-faulted in on every call).
+  auto reset = [cols, rows](Image<float>& image, float value) {
+    if (image.SameSize(cols, rows)) {
+      std::fill(image.data(), image.data() + image.size(), value);
+    } else {
+      image = Image<float>(cols, rows, value);
+    }
+  };
+  reset(view.panorama_distance_m, kNan);
+  reset(view.panorama_amplitude, kNan);
+  thread_local Image<float> zbuffer;
+  reset(zbuffer, std::numeric_limits<float>::infinity());
+  view.frame_offsets.clear();
+  view.camera_to_base.clear();
 
   const Eigen::Vector3d up = o.pan_unit.axis.normalized();
   const Eigen::Vector3d z(0.0, 0.0, 1.0);
@@ -221,7 +251,7 @@ PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
   }
   out.flags.resize(capacity);
   std::size_t n_out = 0;
-  Scratch sc;
+  thread_local Scratch sc;
   float* zb = zbuffer.data();
   float* pano_d = view.panorama_distance_m.data();
   float* pano_a = view.panorama_amplitude.data();
@@ -246,39 +276,16 @@ PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
                     sc.by.data(), sc.bz.data(), sc.valid.data());
     // Append (the valid points, or all) in input order, branch-free: every point is written at
     // the end and the end advances only past the kept ones (the capacity has room for all).
-    const std::uint8_t keep_all = o.only_valid ? 0 : 1;
-    float* ox = out.x.data();
-    float* oy = out.y.data();
-    float* oz = out.z.data();
-    float* oa = out.amplitude.data();
-    float* oi = out.intensity.data();
-    float* od = out.delta_l_m.data();
-    PixelFlags* of = out.flags.data();
-    for (std::size_t i = 0; i < n; ++i) {
-      ox[n_out] = sc.bx[i];
-      oy[n_out] = sc.by[i];
-      oz[n_out] = sc.bz[i];
-      oa[n_out] = cam.amplitude[i];
-      oi[n_out] = cam.intensity[i];
-      od[n_out] = cam.delta_l_m[i];
-      of[n_out] = cam.flags[i];
-      n_out += static_cast<std::size_t>(sc.valid[i] | keep_all);
-    }
+    n_out = AppendPoints(n, o.only_valid ? 0 : 1, sc.bx.data(), sc.by.data(), sc.bz.data(),
+                         cam.amplitude.data(), cam.intensity.data(), cam.delta_l_m.data(),
+                         cam.flags.data(), sc.valid.data(), n_out, out);
     view.frame_offsets.push_back(n_out);
 
-    // Splat: the point nearest to the rotation centre wins its cell (the first of equals).
+    // Panorama cells, then the z-buffered splat.
     CellsOfPoints(n, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
                   sc.cell.data(), sc.range.data());
-    const float* d = frame.radial_distance_m.data();
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::int32_t c = sc.cell[i];
-      if (c < 0) continue;
-      if (sc.range[i] < zb[c]) {
-        zb[c] = sc.range[i];
-        pano_d[c] = d[i];
-        pano_a[c] = cam.amplitude[i];
-      }
-    }
+    Splat(n, sc.cell.data(), sc.range.data(), frame.radial_distance_m.data(), cam.amplitude.data(),
+          zb, pano_d, pano_a);
   }
   for (auto* v : {&out.x, &out.y, &out.z, &out.amplitude, &out.intensity, &out.delta_l_m}) {
     v->resize(n_out);
@@ -289,9 +296,8 @@ PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
 
   const double f_hz = frames[0].info.modulation_frequency_hz;
   const double far_default = (std::isfinite(f_hz) && f_hz > 0.0) ? UnambiguousRangeM(f_hz) : 0.0;
-  view.panorama = FalseColorImage(view.panorama_distance_m, Image<PixelFlags>(),
-                                  view.panorama_amplitude, far_default, o.color);
-  return view;
+  FalseColorImageInto(view.panorama_distance_m, Image<PixelFlags>(), view.panorama_amplitude,
+                      far_default, o.color, view.panorama);
 }
 
 }  // namespace tofcam

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "../core/fast_atan2.h"
 #include "fast_math.h"
 #include "hot_loop.h"
 #include "optics.h"
@@ -193,6 +194,73 @@ bool Saturate(std::vector<float> (&taps)[4], std::vector<float>& bloom_mean,
     }
   }
   return true;
+}
+
+namespace {
+
+// std::round / std::llround of x >= 0 (half away from zero), exactly: x - floor(x) is exact for
+// doubles below 2^52, so the comparison with 0.5 decides as the libm functions do.
+inline double RoundNonNegative(double x) {
+  const double f = std::floor(x);
+  return f + ((x - f >= 0.5) ? 1.0 : 0.0);
+}
+
+// The vectorisable part of DemodulateRow; `redo` = 1 where the register is within 1e-5 of a tie.
+[[gnu::noinline]] TOFCAM_SIM_CLONES void DemodulateSpan(
+    int n, const float* __restrict t0, const float* __restrict t1, const float* __restrict t2,
+    const float* __restrict t3, bool clip, double full_well, double gain, int offset_register,
+    std::uint16_t* __restrict distance, std::uint16_t* __restrict amplitude,
+    std::uint16_t* __restrict intensity, std::uint8_t* __restrict saturated,
+    std::uint8_t* __restrict redo) {
+  const double two_pi = 2 * kPi;
+  // Demodulate's clipping: a tap at or above the full well is set to it (with `clip`).
+  auto clipped = [clip, full_well](float tap, bool& sat) {
+    const double v = std::max(0.0, static_cast<double>(tap));
+    const bool over = clip & (v >= full_well);
+    sat |= over;
+    return over ? full_well : v;
+  };
+  for (int c = 0; c < n; ++c) {
+    bool sat = false;
+    const double m0 = clipped(t0[c], sat), m1 = clipped(t1[c], sat);
+    const double m2 = clipped(t2[c], sat), m3 = clipped(t3[c], sat);
+    const double i_comp = m0 - m2, q_comp = m1 - m3;
+    double phase = tofcam::internal::FastAtan2(q_comp, i_comp);
+    phase += phase < 0 ? two_pi : 0.0;
+    const double x = phase / two_pi * kDistanceRegisterSpan;
+    const double frac = x - std::floor(x);
+    redo[c] = static_cast<std::uint8_t>(std::abs(frac - 0.5) < 1e-5);
+    const double reg = RoundNonNegative(x) + offset_register;
+    distance[c] = static_cast<std::uint16_t>(static_cast<std::int32_t>(reg) & 0xFFFF);
+    const double amp = std::sqrt(i_comp * i_comp + q_comp * q_comp) / 2;
+    const double off = (m0 + m1 + m2 + m3) / 4;
+    amplitude[c] = static_cast<std::uint16_t>(static_cast<std::int32_t>(
+        std::min<double>(kMaxSignalRegister, RoundNonNegative(gain * amp))));
+    intensity[c] = static_cast<std::uint16_t>(static_cast<std::int32_t>(
+        std::min<double>(kMaxSignalRegister, RoundNonNegative(gain * off))));
+    saturated[c] = static_cast<std::uint8_t>(sat | (gain * off > kMaxSignalRegister));
+  }
+}
+
+}  // namespace
+
+void DemodulateRow(int n, const float* const taps[4], bool clip, double full_well, double gain,
+                   int offset_register, std::uint16_t* __restrict distance,
+                   std::uint16_t* __restrict amplitude, std::uint16_t* __restrict intensity,
+                   std::uint8_t* __restrict saturated) {
+  thread_local std::vector<std::uint8_t> redo;
+  redo.resize(static_cast<std::size_t>(n));
+  DemodulateSpan(n, taps[0], taps[1], taps[2], taps[3], clip, full_well, gain, offset_register,
+                 distance, amplitude, intensity, saturated, redo.data());
+  for (int c = 0; c < n; ++c) {
+    if (redo[c] == 0) continue;
+    const float t[4] = {taps[0][c], taps[1][c], taps[2][c], taps[3][c]};
+    const PixelRegisters px = Demodulate(t, clip, full_well, gain, offset_register);
+    distance[c] = px.distance;
+    amplitude[c] = px.amplitude;
+    intensity[c] = px.intensity;
+    saturated[c] = px.saturated ? 1 : 0;
+  }
 }
 
 }  // namespace tofcam::sim::internal

@@ -102,6 +102,7 @@ struct SimulatedCamera::Impl {
     GlossyScratch glossy;               // their lobes
     std::vector<int> mirrored;          // subsamples whose first hit is a mirror (bounces follow)
     SensorRow sensor;
+    std::vector<std::uint8_t> saturated;  // one row of DemodulateRow
   };
   std::vector<Scratch> scratch;  // per thread
   std::unique_ptr<RowPool> pool;
@@ -580,16 +581,19 @@ std::optional<Frame> SimulatedCamera::Grab() {
   }
   // Clip, demodulate and quantise.
   const double gain = model.gain_reg_per_e;
-  ParallelRows(h, opt.threads, [&](int r0, int r1, int /*thread*/) {
+  ParallelRows(h, opt.threads, [&](int r0, int r1, int thread) {
+    std::vector<std::uint8_t>& saturated = im.scratch[thread].saturated;
+    saturated.resize(static_cast<std::size_t>(w));
     for (int r = r0; r < r1; ++r) {
+      const std::size_t row = static_cast<std::size_t>(r) * w;
+      const float* const taps[4] = {&im.taps[0][row], &im.taps[1][row], &im.taps[2][row],
+                                    &im.taps[3][row]};
+      DemodulateRow(w, taps, opt.saturation, full_well, gain, offset_register_,
+                    frame.distance.Row(r).data(), frame.amplitude.Row(r).data(),
+                    frame.intensity.Row(r).data(), saturated.data());
       for (int c = 0; c < w; ++c) {
-        const std::size_t p = static_cast<std::size_t>(r) * w + c;
-        const float n[4] = {im.taps[0][p], im.taps[1][p], im.taps[2][p], im.taps[3][p]};
-        const PixelRegisters px = Demodulate(n, opt.saturation, full_well, gain, offset_register_);
-        frame.distance[p] = px.distance;
-        frame.amplitude[p] = px.amplitude;
-        frame.intensity[p] = px.intensity;
-        if (px.saturated) truth.causes[p].Set(Flag::kSaturated);
+        if (saturated[static_cast<std::size_t>(c)] != 0)
+          truth.causes[row + c].Set(Flag::kSaturated);
       }
     }
   });

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -217,6 +218,75 @@ TEST(PanViewTest, SameViewAsTheStraightforwardAssembly) {
     EXPECT_EQ(view.panorama_amplitude.data()[i], ref.amplitude.data()[i]) << i;
   }
   EXPECT_GT(filled, 10000);
+}
+
+// Same values bit for bit (so NaN equals NaN).
+bool SameBits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+}
+
+// Everything a view holds, compared field by field.
+void ExpectSameView(const PanView& a, const PanView& b) {
+  EXPECT_EQ(a.cloud.width, b.cloud.width);
+  EXPECT_EQ(a.cloud.height, b.cloud.height);
+  EXPECT_TRUE(SameBits(a.cloud.x, b.cloud.x));
+  EXPECT_TRUE(SameBits(a.cloud.y, b.cloud.y));
+  EXPECT_TRUE(SameBits(a.cloud.z, b.cloud.z));
+  EXPECT_TRUE(SameBits(a.cloud.amplitude, b.cloud.amplitude));
+  EXPECT_TRUE(SameBits(a.cloud.delta_l_m, b.cloud.delta_l_m));
+  EXPECT_EQ(a.cloud.flags, b.cloud.flags);
+  EXPECT_EQ(a.frame_offsets, b.frame_offsets);
+  ASSERT_EQ(a.camera_to_base.size(), b.camera_to_base.size());
+  for (std::size_t k = 0; k < a.camera_to_base.size(); ++k) {
+    EXPECT_TRUE(a.camera_to_base[k].isApprox(b.camera_to_base[k], 0.0));
+  }
+  ASSERT_TRUE(a.panorama_distance_m.SameSize(b.panorama_distance_m));
+  for (std::size_t i = 0; i < a.panorama_distance_m.size(); ++i) {
+    const float x = a.panorama_distance_m.data()[i], y = b.panorama_distance_m.data()[i];
+    EXPECT_TRUE((std::isnan(x) && std::isnan(y)) || x == y) << i;
+  }
+  ASSERT_TRUE(a.panorama.SameSize(b.panorama));
+  for (std::size_t i = 0; i < a.panorama.size(); ++i) {
+    EXPECT_EQ(a.panorama.data()[i], b.panorama.data()[i]) << i;
+  }
+  EXPECT_EQ(a.resolution_rad, b.resolution_rad);
+}
+
+TEST(PanViewTest, ReusedViewEqualsAFreshOne) {
+  // A view reused for another sweep (fewer frames, other distances, all points kept, then a
+  // coarser strip) must hold exactly what a fresh MakePanView gives: nothing of the previous
+  // sweep may survive in the cloud, the offsets, the poses or the panorama.
+  const CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
+  const RayTable rays = MakeRayTable(k);
+  auto sweep = [&](std::vector<double> degrees, float base_m) {
+    std::vector<MetricFrame> frames;
+    for (double deg : degrees) {
+      MetricFrame f;
+      f.radial_distance_m = Image<float>(k.width, k.height, base_m);
+      f.amplitude = Image<float>(k.width, k.height, 1000.0f);
+      f.flags = Image<PixelFlags>(k.width, k.height);
+      for (std::size_t i = 0; i < f.radial_distance_m.size(); i += 7) {
+        f.radial_distance_m.data()[i] = base_m + 0.001f * static_cast<float>(i % 1000);
+        if (i % 3 == 0) f.flags.data()[i].Set(Flag::kLowAmplitude);
+      }
+      f.info.pan_angle_rad = deg * kDeg;
+      f.info.modulation_frequency_hz = 20e6;
+      frames.push_back(std::move(f));
+    }
+    return frames;
+  };
+  const std::vector<MetricFrame> first = sweep({-60, -30, 0, 30, 60}, 2.0f);
+  const std::vector<MetricFrame> second = sweep({-20, 40}, 4.5f);
+  PanViewOptions o;
+  PanView reused;
+  MakePanViewInto(first, rays, o, reused);
+  ExpectSameView(reused, MakePanView(first, rays, o));
+  o.only_valid = false;
+  MakePanViewInto(second, rays, o, reused);
+  ExpectSameView(reused, MakePanView(second, rays, o));
+  o.resolution_deg = 1.0;
+  MakePanViewInto(first, rays, o, reused);
+  ExpectSameView(reused, MakePanView(first, rays, o));
 }
 
 TEST(PanViewTest, ErrorsAreReported) {

@@ -46,6 +46,13 @@ struct FalseColorOptions {
                                           const Image<float>& amplitude, double far_default_m,
                                           const FalseColorOptions& options);
 
+/// The same into `out`, reusing its storage when it already has the distance image's size (a
+/// per-frame loop allocates nothing); every pixel is overwritten. Throws like FalseColorImage,
+/// before anything is written.
+void FalseColorImageInto(const Image<float>& distance_m, const Image<PixelFlags>& flags,
+                         const Image<float>& amplitude, double far_default_m,
+                         const FalseColorOptions& options, Image<Rgb8>& out);
+
 /// Colour of one distance (V = 1), t clamped to [0, 1]; for legends and tests.
 [[nodiscard]] Rgb8 FalseColorOfDistance(double distance_m, double near_m, double far_m);
 

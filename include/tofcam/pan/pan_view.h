@@ -76,4 +76,11 @@ struct PanView {
 [[nodiscard]] PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
                                   const PanViewOptions& options);
 
+/// The same into `view`, reusing its storage (cloud, panorama images) when a previous view of
+/// the same strip is passed in: a loop that assembles a view per sweep allocates nothing once
+/// the sizes are stable. Every field is overwritten. Throws like MakePanView; after a throw
+/// `view` holds no usable result.
+void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
+                     const PanViewOptions& options, PanView& view);
+
 }  // namespace tofcam

@@ -1,0 +1,50 @@
+#pragma once
+// A branch-free double-precision atan2 for vectorised loops (pan assembly, the simulator's
+// demodulation). Internal to tofcam; not installed.
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+
+#include "tofcam/core/units.h"
+
+namespace tofcam::internal {
+
+/// a where c, else b, by bit masks: GCC turns a ternary into a branch in some loops and keeps
+/// them scalar (branches on an octant are unpredictable).
+inline double Sel(bool c, double a, double b) {
+  const std::uint64_t m = 0 - static_cast<std::uint64_t>(c);
+  return std::bit_cast<double>((std::bit_cast<std::uint64_t>(a) & m) |
+                               (std::bit_cast<std::uint64_t>(b) & ~m));
+}
+
+/// atan2(y, x) in [-pi, pi] without libm, branch-free so loops over it vectorise: octant
+/// reduction to atan(u), |u| <= tan(pi/8), by its Taylor series to u^21 (truncation error below
+/// tan(pi/8)^23 / 23 < 7e-11 rad; the reductions add a few ulps of pi). atan2(0, 0) = 0, and
+/// y = -0 gives +0 or pi (libm: -0 or -pi).
+inline double FastAtan2(double y, double x) {
+  constexpr double kTanPi8 = 0.41421356237309504880;
+  const double ax = std::abs(x), ay = std::abs(y);
+  const double hi = std::max(ax, ay), lo = std::min(ax, ay);
+  const double t = lo / std::max(hi, 1e-300);
+  const bool reduce = t > kTanPi8;
+  const double u = Sel(reduce, (t - 1.0) / (t + 1.0), t);
+  const double u2 = u * u;
+  double p = 1.0 / 21;
+  p = p * u2 - 1.0 / 19;
+  p = p * u2 + 1.0 / 17;
+  p = p * u2 - 1.0 / 15;
+  p = p * u2 + 1.0 / 13;
+  p = p * u2 - 1.0 / 11;
+  p = p * u2 + 1.0 / 9;
+  p = p * u2 - 1.0 / 7;
+  p = p * u2 + 1.0 / 5;
+  p = p * u2 - 1.0 / 3;
+  p = p * u2 + 1.0;
+  double a = Sel(reduce, kPi / 4, 0.0) + u * p;
+  a = Sel(ay > ax, kPi / 2 - a, a);
+  a = Sel(x < 0.0, kPi - a, a);
+  return Sel(y < 0.0, -a, a);
+}
+
+}  // namespace tofcam::internal
