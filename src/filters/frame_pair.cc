@@ -12,6 +12,8 @@
 namespace tofcam {
 namespace {
 
+constexpr std::size_t kMinPixelsForMedian = 64;
+
 [[noreturn]] void Bad(const std::string& what) { throw Error(ErrorCode::kInvalidArgument, what); }
 
 bool Good(const MetricFrame& f, std::size_t i) {
@@ -40,6 +42,14 @@ void FramePairOptions::Validate() const {
   if (!(max_amplitude_ratio == 0.0 || (max_amplitude_ratio >= 1.0 && max_amplitude_ratio <= 1e6))) {
     Bad("frame pair max_amplitude_ratio = " + std::to_string(max_amplitude_ratio) +
         " must be 0 (no check) or in [1, 1e6]");
+  }
+  if (!(max_amplitude_disagreement_sigma >= 0.0 && max_amplitude_disagreement_sigma <= 1000.0)) {
+    Bad("frame pair max_amplitude_disagreement_sigma = " +
+        std::to_string(max_amplitude_disagreement_sigma) + " must be in [0, 1000] (0: no check)");
+  }
+  if (!(min_amplitude_tolerance >= 0.0 && min_amplitude_tolerance <= 1.0)) {
+    Bad("frame pair min_amplitude_tolerance = " + std::to_string(min_amplitude_tolerance) +
+        " must be in [0, 1]");
   }
 }
 
@@ -79,6 +89,30 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
   const bool amplitudes = amplitude_scale > 0.0 && previous.amplitude.SameSize(w, h) &&
                           current.amplitude.SameSize(w, h);
   const std::size_t n = current.radial_distance_m.size();
+  // Two frequencies: the pair's median log amplitude ratio (per µs) over the pixels good in
+  // both (at least kMinPixelsForMedian of them), the reference the per-pixel amplitude check
+  // compares with (the demodulation contrast, and so the amplitude per µs, differs by frequency on
+  // a real camera).
+  const bool two_returns_check =
+      dual && amplitudes && options.max_amplitude_disagreement_sigma > 0.0;
+  double median_log_ratio = 0.0;
+  if (two_returns_check) {
+    thread_local std::vector<double> logs;
+    logs.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+      const double a1 = previous.amplitude[i] * amplitude_scale, a2 = current.amplitude[i];
+      if (Good(previous, i) && Good(current, i) && a1 > 0.0 && a2 > 0.0) {
+        logs.push_back(std::log(a2 / a1));
+      }
+    }
+    // Too few pixels to tell the camera's ratio from the scene's: equal contrast assumed.
+    if (logs.size() >= kMinPixelsForMedian) {
+      auto mid = logs.begin() + static_cast<std::ptrdiff_t>(logs.size() / 2);
+      std::nth_element(logs.begin(), mid, logs.end());
+      median_log_ratio = *mid;
+    }
+  }
+  const double log_floor = std::log1p(options.min_amplitude_tolerance);
   for (std::size_t i = 0; i < n; ++i) {
     const bool ok1 = Good(previous, i), ok2 = Good(current, i);
     if (!ok1 && !ok2) continue;
@@ -123,13 +157,21 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
     } else {
       a = d1 - l1 * std::round((d1 - d2) / l1);  // the same surface near the 0 / L seam
     }
-    bool moved = false;
+    bool moved = false, two_returns = false;
     if (amplitudes) {
       const double a1 = previous.amplitude[i] * amplitude_scale, a2 = current.amplitude[i];
       // Both positive or the check cannot tell (a zero amplitude has no phase anyway).
-      moved = a1 > 0.0 && a2 > 0.0 && std::abs(std::log(a2 / a1)) > max_log_ratio;
+      const bool both = a1 > 0.0 && a2 > 0.0;
+      const double log_ratio = both ? std::log(a2 / a1) : 0.0;
+      moved = both && std::abs(log_ratio) > max_log_ratio;
+      if (two_returns_check && both) {
+        const double p1 = 2 * kPi * s1 / l1, p2 = 2 * kPi * s2 / l2;  // σ of ln A per frame
+        const double allowed = std::max(
+            options.max_amplitude_disagreement_sigma * std::sqrt(p1 * p1 + p2 * p2), log_floor);
+        two_returns = std::abs(log_ratio - median_log_ratio) > allowed;
+      }
     }
-    if (!(std::abs(a - b) <= tolerance) || ambiguous || moved) {
+    if (!(std::abs(a - b) <= tolerance) || ambiguous || moved || two_returns) {
       current.flags[i] |= Flag::kInconsistent;
       if (dual) current.radial_distance_m[i] = static_cast<float>(b);
       continue;

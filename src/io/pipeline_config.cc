@@ -142,21 +142,26 @@ void VisitOptions(V& v, PipelineOptions& o) {
             "rejected frames before a pixel is forgotten, [0, 255]");
     v.Field("fallback_sigma_m", o.temporal.fallback_sigma_m, "σ where ΔL is missing, m, > 0");
   });
-  v.Section("frame_pair",
-            "consecutive frames combined: dual-frequency unwrapping or HDR (not in the paper)",
-            [&] {
-              v.Field("enabled", o.frame_pair_enabled, "needs accuracy.enabled");
-              v.Field("alternate_modulation_frequency_hz", o.alternate_modulation_frequency_hz,
-                      "Hz; 0 = do not alternate; e.g. 17000000 with a 20 MHz camera");
-              v.Field("hdr_exposure_ratio", o.hdr_exposure_ratio,
-                      "0 = off; else every other frame this many times longer, [1.5, 64]");
-              v.Field("max_range_m", o.frame_pair.max_range_m, "m, (0, 1000]");
-              v.Field("max_disagreement_sigma", o.frame_pair.max_disagreement_sigma,
-                      "kInconsistent beyond this many combined σ, (0, 1000]");
-              v.Field("min_tolerance_m", o.frame_pair.min_tolerance_m, "m, [0, 10]");
-              v.Field("max_amplitude_ratio", o.frame_pair.max_amplitude_ratio,
-                      "amplitude per µs change beyond which a pixel moved; 0 = off, [1, 1e6]");
-            });
+  v.Section(
+      "frame_pair",
+      "consecutive frames combined: dual-frequency unwrapping or HDR (not in the paper)", [&] {
+        v.Field("enabled", o.frame_pair_enabled, "needs accuracy.enabled");
+        v.Field("alternate_modulation_frequency_hz", o.alternate_modulation_frequency_hz,
+                "Hz; 0 = do not alternate; e.g. 17000000 with a 20 MHz camera");
+        v.Field("hdr_exposure_ratio", o.hdr_exposure_ratio,
+                "0 = off; else every other frame this many times longer, [1.5, 64]");
+        v.Field("max_range_m", o.frame_pair.max_range_m, "m, (0, 1000]");
+        v.Field("max_disagreement_sigma", o.frame_pair.max_disagreement_sigma,
+                "kInconsistent beyond this many combined σ, (0, 1000]");
+        v.Field("min_tolerance_m", o.frame_pair.min_tolerance_m, "m, [0, 10]");
+        v.Field("max_amplitude_ratio", o.frame_pair.max_amplitude_ratio,
+                "amplitude per µs change beyond which a pixel moved; 0 = off, [1, 1e6]");
+        v.Field("max_amplitude_disagreement_sigma", o.frame_pair.max_amplitude_disagreement_sigma,
+                "two frequencies: amplitude disagreement (σ of ln A) beyond which a pixel "
+                "sums two returns; 0 = off, [0, 1000]");
+        v.Field("min_amplitude_tolerance", o.frame_pair.min_amplitude_tolerance,
+                "floor of that tolerance, relative amplitude, [0, 1]");
+      });
   v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");
     v.Field("kind", o.controller.kind,

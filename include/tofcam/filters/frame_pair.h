@@ -13,7 +13,9 @@
 /// frequencies, a wrong wrap count) is flagged kInconsistent, and the pixel's ΔL becomes the
 /// combined σ. So is a pixel whose amplitude per µs changed by more than `max_amplitude_ratio`
 /// (it saw two surfaces) and, with two frequencies, one for which a second pair of wrap counts
-/// also agrees within the tolerance (noise too large to tell the pairs apart: ambiguous).
+/// also agrees within the tolerance (noise too large to tell the pairs apart: ambiguous) or whose
+/// two amplitudes disagree beyond their noise (`max_amplitude_disagreement_sigma`: it sums two
+/// returns, a mixed pixel or two-path multipath).
 ///
 /// Single-frequency wrap detection (WrapCheckFilter) is the fallback where only one frequency
 /// exists.
@@ -42,6 +44,17 @@ struct FramePairOptions {
   /// reconcile: kInconsistent. Frames of different exposure without a known
   /// FrameInfo::integration_time_us are not checked.
   double max_amplitude_ratio = 2.0;
+  /// Two frequencies only: largest disagreement of the two amplitudes per µs, in combined σ of
+  /// the log amplitude (σ_lnA = 2π ΔL / L per frame, as phasor noise is isotropic), after the
+  /// pair's median ratio is divided out (the demodulation contrast differs by frequency), [0,
+  /// 1000]; 0 = no check. One surface returns the same amplitude at both frequencies; a pixel
+  /// that sums two returns (a mixed pixel at a depth edge, two-path multipath) does not, since
+  /// the phase difference of its returns differs by frequency, and its distance is then wrong
+  /// at both: kInconsistent. A floor of `min_amplitude_tolerance` (relative) applies. With
+  /// fewer than 64 pixels good in both frames the median is not estimated (ratio 1 assumed).
+  double max_amplitude_disagreement_sigma = 3.0;
+  /// Floor of that tolerance as a relative amplitude difference, [0, 1].
+  double min_amplitude_tolerance = 0.02;
 
   void Validate() const;
 };
