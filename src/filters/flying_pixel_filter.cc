@@ -85,6 +85,22 @@ struct Thresholds {
   float contrast, floor_a, close, far, max_delta, avg_delta;
 };
 
+// The distance conditions at one pixel: the centre is usable (weight cw != 0) and lies more than
+// `close` above the window minimum and `far` below its maximum (3-min / 3-max rows up, mid,
+// down), with the larger and the mean margin above their thresholds. 1 or 0; integer ANDs
+// instead of && keep the callers' loops free of branches.
+[[gnu::always_inline]] inline unsigned DistancePass(float lu, float lm, float lv, float hu,
+                                                    float hm, float hv, float dc, float cw,
+                                                    const Thresholds& t) {
+  const float dmin = std::min(std::min(lu, lm), lv);
+  const float dmax = std::max(std::max(hu, hm), hv);
+  const float to_min = dc - dmin, to_max = dmax - dc;
+  return static_cast<unsigned>(cw != 0.0f) & static_cast<unsigned>(to_min > t.close) &
+         static_cast<unsigned>(to_max > t.far) &
+         static_cast<unsigned>(std::max(to_min, to_max) > t.max_delta) &
+         static_cast<unsigned>(0.5f * (to_min + to_max) > t.avg_delta);
+}
+
 // 1 where the centre is usable and the distance conditions hold (the rows' 3-min / 3-max up,
 // mid and down; `cw` the mid row's weights), else 0.
 TOFCAM_HOT_LOOP void DistanceCandidates(int w, const Thresholds& t, const float* __restrict lu,
@@ -93,19 +109,9 @@ TOFCAM_HOT_LOOP void DistanceCandidates(int w, const Thresholds& t, const float*
                                         const float* __restrict hv, const float* __restrict d,
                                         const float* __restrict cw,
                                         std::uint8_t* __restrict candidate) {
-  const float close = t.close, far = t.far, max_delta = t.max_delta, avg_delta = t.avg_delta;
   for (int c = 0; c < w; ++c) {
-    const float dmin = std::min(std::min(lu[c], lm[c]), lv[c]);
-    const float dmax = std::max(std::max(hu[c], hm[c]), hv[c]);
-    const float dc = d[c];
-    const float to_min = dc - dmin, to_max = dmax - dc;
-    // Integer ANDs instead of && keep the loop free of branches.
-    const unsigned pass = static_cast<unsigned>(cw[c] != 0.0f) &
-                          static_cast<unsigned>(to_min > close) &
-                          static_cast<unsigned>(to_max > far) &
-                          static_cast<unsigned>(std::max(to_min, to_max) > max_delta) &
-                          static_cast<unsigned>(0.5f * (to_min + to_max) > avg_delta);
-    candidate[c] = static_cast<std::uint8_t>(pass);
+    candidate[c] = static_cast<std::uint8_t>(
+        DistancePass(lu[c], lm[c], lv[c], hu[c], hm[c], hv[c], d[c], cw[c], t));
   }
 }
 
@@ -134,18 +140,9 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
                                         const float* __restrict qm, const float* __restrict qv,
                                         PixelFlags* __restrict f) {
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
-  const float close = t.close, far = t.far, max_delta = t.max_delta, avg_delta = t.avg_delta;
   std::uint32_t count = 0;
   for (int c = 0; c < w; ++c) {
-    const float dmin = std::min(std::min(lu[c], lm[c]), lv[c]);
-    const float dmax = std::max(std::max(hu[c], hm[c]), hv[c]);
-    const float dc = d[c];
-    const float to_min = dc - dmin, to_max = dmax - dc;
-    const unsigned pass = static_cast<unsigned>(cw[c] != 0.0f) &
-                          static_cast<unsigned>(to_min > close) &
-                          static_cast<unsigned>(to_max > far) &
-                          static_cast<unsigned>(std::max(to_min, to_max) > max_delta) &
-                          static_cast<unsigned>(0.5f * (to_min + to_max) > avg_delta);
+    const unsigned pass = DistancePass(lu[c], lm[c], lv[c], hu[c], hm[c], hv[c], d[c], cw[c], t);
     count += pass;
     const unsigned flying =
         pass & static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
