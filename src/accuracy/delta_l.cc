@@ -63,6 +63,7 @@ void DeltaLFitOptions::Validate() const {
   AccuracyOptions a = accuracy;
   a.scale = 1.0;
   a.Validate();
+  saturation.Validate();
 }
 
 Image<float> ComputeDeltaL(const MetricFrame& frame, const AccuracyOptions& options) {
@@ -237,8 +238,11 @@ DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
   const double range_m = UnambiguousRangeM(f_hz);
   const std::size_t n_pix = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
   const double n_frames = static_cast<double>(frames.size());
+  const std::vector<std::uint8_t> clipped =
+      accuracy_internal::ClippedInAnyFrame(frames, options.saturation);
   std::vector<double> sigma, dl;
   for (std::size_t i = 0; i < n_pix; ++i) {
+    if (clipped[i]) continue;
     double mean_dl = 0.0;
     bool ok = true;
     for (std::size_t k = 0; k < frames.size() && ok; ++k) {

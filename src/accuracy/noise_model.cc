@@ -231,6 +231,7 @@ void NoiseModelFitOptions::Validate() const {
   a.scale = 1.0;
   a.model.reset();
   a.Validate();
+  saturation.Validate();
 }
 
 NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
@@ -265,11 +266,14 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
   const double k_eq2 = range_m / (2.0 * std::sqrt(8.0));
 
   const double n = static_cast<double>(frames.size());
+  const std::vector<std::uint8_t> clipped =
+      accuracy_internal::ClippedInAnyFrame(frames, options.saturation);
   std::vector<PixelSample> samples;
   for (int r = 0; r < h; ++r) {
     for (int c = 0; c < w; ++c) {
       const std::size_t i =
           static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(c);
+      if (clipped[i]) continue;
       PixelSample p{};
       if (!accuracy_internal::TemporalSigma(frames, i, range_m, p.sigma_m)) continue;
       bool ok = true;

@@ -2,10 +2,13 @@
 // Private helper of the noise fits (delta_l.cc, noise_model.cc): a pixel's temporal σ.
 
 #include <cmath>
+#include <cstdint>
 #include <span>
+#include <vector>
 
 #include "tofcam/core/frame.h"
 #include "tofcam/core/units.h"
+#include "tofcam/filters/pixel_filters.h"
 
 namespace tofcam::accuracy_internal {
 
@@ -34,6 +37,24 @@ inline bool TemporalSigma(std::span<const MetricFrame> frames, std::size_t i, do
   }
   sigma_m = std::sqrt(std::max((sum2 - sum * sum / n) / (n - 1.0), 0.0));
   return true;
+}
+
+// 1 for every pixel the saturation filter's rule (registers, or the source's flags) flags in at
+// least one of `frames`. A clipped pixel's distance is not a measurement (the pipeline rejects
+// it), and one clipped in some frames only jumps between a reading and a clipped value: neither
+// spread is the noise the fits model. The SR-2 reports no saturation bit, so the flags alone
+// would let every clipped pixel in.
+inline std::vector<std::uint8_t> ClippedInAnyFrame(std::span<const MetricFrame> frames,
+                                                   const SaturationOptions& options) {
+  std::vector<std::uint8_t> clipped(frames.empty() ? 0 : frames.front().radial_distance_m.size(),
+                                    0);
+  for (const MetricFrame& f : frames) {
+    const Image<PixelFlags> raised = SaturationFilter(f, options);
+    for (std::size_t i = 0; i < clipped.size() && i < raised.size(); ++i) {
+      clipped[i] |= raised[i].Has(Flag::kSaturated) ? 1 : 0;
+    }
+  }
+  return clipped;
 }
 
 }  // namespace tofcam::accuracy_internal

@@ -158,6 +158,28 @@ TEST(DeltaLFitTest, LeavesOutNearlyDarkPixels) {
   EXPECT_THROW((void)FitDeltaLScale(frames, no_cut), Error);
 }
 
+TEST(DeltaLFitTest, SkipsPixelsClippedInAnyFrame) {
+  // Three pixels clip in one frame each (the brightest-tap rule: intensity + amplitude at full
+  // scale; the SR-2 sets no saturation bit), one of them with its phase thrown 1 m off. They are
+  // left out, and the fit recovers the ideal factor as without them.
+  std::vector<MetricFrame> frames = FourTapFrames(1.0, 40, 5);
+  for (int k : {0, 1, 2}) {
+    frames[static_cast<std::size_t>(10 * k + 3)].intensity[static_cast<std::size_t>(100 * k)] =
+        65000.0f;
+  }
+  frames[13].radial_distance_m[100] += 1.0f;
+  const DeltaLScaleFit fit = FitDeltaLScale(frames);
+  EXPECT_EQ(fit.pixels_used, 480 - 3);
+  const double expected = 2.0 / kPi;
+  EXPECT_NEAR(fit.scale, expected, 0.03 * expected);
+  DeltaLFitOptions blind;
+  // Above any register: the rule never fires.
+  blind.saturation.max_intensity = blind.saturation.max_amplitude = blind.saturation.max_peak = 1e9;
+  EXPECT_EQ(FitDeltaLScale(frames, blind).pixels_used, 480);
+  blind.saturation.max_intensity = -1.0;
+  EXPECT_THROW((void)FitDeltaLScale(frames, blind), Error);
+}
+
 TEST(DeltaLFitTest, SkipsInvalidPixelsAndRejectsTooFewFrames) {
   std::vector<MetricFrame> frames = FourTapFrames(1.0, 5, 3);
   frames[2].flags(0, 0) = PixelFlags(Flag::kInvalid);

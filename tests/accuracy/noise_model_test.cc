@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -176,6 +177,49 @@ TEST(NoiseModel, DeltaLStageOutputsTheModelsSigma) {
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::kMismatch);
   }
+}
+
+TEST(NoiseModel, LeavesOutPixelsClippedInAnyFrame) {
+  // σ = 0.6 ΔL of eq. 2 on pixels well below full scale (brightest tap I + A <= 60000), except
+  // every 7th pixel, which clips in frame 3: its intensity reads full scale there and its
+  // distance is 1 m off (a clipped pixel's phase is not a measurement). The SR-2 has no
+  // saturation bit, so only the saturation rule on the registers can tell. With it, the fit
+  // sees the clean pixels only and predicts every decile within 10 %; with the rule disabled the
+  // clipped pixels' 1 m jumps wreck the deciles they land in.
+  Scene s = MakeScene(12, [](double a, double in, double) { return 0.6 * Eq2(a, in); });
+  for (std::size_t i = 0; i < s.amplitude.size(); ++i) {
+    s.intensity[i] = std::min(s.intensity[i], 60000.0 - s.amplitude[i]);
+    s.sigma_m[i] = 0.6 * Eq2(s.amplitude[i], s.intensity[i]);
+  }
+  auto frames = Frames(s, 12, 13);
+  int clipped = 0;
+  for (std::size_t i = 0; i < s.amplitude.size(); i += 7) {
+    frames[3].intensity[i] = 65532.0f;
+    frames[3].radial_distance_m[i] += 1.0f;
+    ++clipped;
+  }
+  const NoiseModelFit fit = FitNoiseModel(frames);
+  EXPECT_LT(fit.fitted.max_decile_error, 0.10);
+  NoiseModelFitOptions blind;
+  // Above any register: the rule never fires.
+  blind.saturation.max_intensity = blind.saturation.max_amplitude = blind.saturation.max_peak = 1e9;
+  const NoiseModelFit all = FitNoiseModel(frames, blind);
+  EXPECT_GT(all.fitted.max_decile_error, 0.5);
+  // Exactly the clipped pixels are left out: the fit equals one on frames that flag them invalid.
+  auto flagged = frames;
+  for (std::size_t i = 0; i < s.amplitude.size(); i += 7) {
+    flagged[3].flags[i] = PixelFlags(Flag::kInvalid);
+    flagged[3].intensity[i] = static_cast<float>(s.intensity[i]);
+  }
+  const NoiseModelFit same = FitNoiseModel(flagged);
+  EXPECT_EQ(same.training_pixels, fit.training_pixels);
+  EXPECT_EQ(same.held_out_pixels, fit.held_out_pixels);
+  EXPECT_EQ(same.model.log_amplitude, fit.model.log_amplitude);
+  EXPECT_EQ(same.model.intercept, fit.model.intercept);
+  EXPECT_GT(all.held_out_pixels, fit.held_out_pixels);
+  EXPECT_GT(clipped, 800);
+  blind.saturation.max_peak = 0.0;
+  EXPECT_THROW((void)FitNoiseModel(frames, blind), Error);
 }
 
 TEST(NoiseModel, BadInputIsAClearError) {

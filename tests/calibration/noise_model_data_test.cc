@@ -62,23 +62,11 @@ std::vector<MetricFrame> SimFrames(const std::string& scene, int count) {
 TEST(NoiseModelData, SimulatedScenes) {
   // Not a reproduction of anything: the simulator's noise is eq. 2's physics, so the check is
   // that the fitted model loses nothing against it where eq. 2 holds by construction.
+  // The hand at this exposure clips its fingers (they bloom into their neighbours): the clipped
+  // pixels are left out of the fit as the saturation filter rejects them; before they were
+  // (the SR-2 has no saturation bit), this scene missed the decile target by 57 %.
   for (const std::string& scene : sim::BuiltinSceneNames()) {
-    const NoiseModelFit fit = FitNoiseModel(SimFrames(scene, 16));
-    if (scene != "hand") {
-      ExpectTargets(fit, "sim:" + scene);
-      continue;
-    }
-    // The hand at the controller's settled exposure (the fingers clip and bloom into
-    // their neighbours) misses the decile target: measured 57 % (eq. 2: 119 %), see
-    // docs/noise_model.md. Asserted: it still ranks as well as eq. 2 and halves its worst decile.
-    const double se = RhoStandardError(fit.eq2.spearman, fit.held_out_pixels);
-    std::printf(
-        "sim:hand (target missed): rho model %.3f eq2 %.3f, worst decile model %.0f %% eq2 "
-        "%.0f %%\n",
-        fit.fitted.spearman, fit.eq2.spearman, 100 * fit.fitted.max_decile_error,
-        100 * fit.eq2.max_decile_error);
-    EXPECT_GE(fit.fitted.spearman, fit.eq2.spearman - 2 * se);
-    EXPECT_LT(fit.fitted.max_decile_error, 0.5 * fit.eq2.max_decile_error);
+    ExpectTargets(FitNoiseModel(SimFrames(scene, 16)), "sim:" + scene);
   }
 }
 

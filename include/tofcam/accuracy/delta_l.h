@@ -16,6 +16,7 @@
 #include <span>
 
 #include "tofcam/core/frame.h"
+#include "tofcam/filters/pixel_filters.h"
 
 namespace tofcam {
 
@@ -101,15 +102,19 @@ struct DeltaLFitOptions {
   int min_pixels = 10;
   /// Options for ΔL during the fit; `scale` is ignored (the fit is for scale 1).
   AccuracyOptions accuracy;
+  /// Pixels this rule flags kSaturated in any frame are left out (as the pipeline's saturation
+  /// filter rejects them): a clipped pixel's spread is not noise.
+  SaturationOptions saturation;
 
   void Validate() const;
 };
 
 /// Noise calibration: the per-pixel temporal σ of the radial distance over `frames` (a static
 /// scene, same integration time) against the mean ΔL of eq. 2 with scale 1. Temporal σ is taken
-/// around the circular mean, so pixels near the 0 / L seam are handled. Pixels invalid in any
-/// frame are skipped. Throws Error(kInvalidArgument) with fewer than 3 frames, frames of different
-/// sizes or modulation frequencies, or fewer than min_pixels usable pixels.
+/// around the circular mean, so pixels near the 0 / L seam are handled. Pixels invalid or
+/// clipped (options.saturation) in any frame are skipped. Throws Error(kInvalidArgument) with fewer
+/// than 3 frames, frames of different sizes or modulation frequencies, or fewer than min_pixels
+/// usable pixels.
 [[nodiscard]] DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
                                             const DeltaLFitOptions& options = {});
 

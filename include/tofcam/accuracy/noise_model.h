@@ -47,6 +47,10 @@ struct NoiseModelFitOptions {
   double max_sigma_fraction_of_range = 0.01;
   /// Eq. 2's options for the baseline (scale ignored: it is fitted).
   AccuracyOptions accuracy;
+  /// Pixels this rule flags kSaturated in any frame are left out, as the pipeline's saturation
+  /// filter rejects them: the model predicts the noise of pixels that are measurements. (Near
+  /// saturation, still unclipped, is the model's A / A_ref channel.)
+  SaturationOptions saturation;
 
   void Validate() const;
 };
