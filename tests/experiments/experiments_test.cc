@@ -379,6 +379,13 @@ TEST(ExperimentsTest, BeyondMethodsBeatThePaperAndTheVendor) {
   EXPECT_LE(m("paper.beyond_right"), 0.01);
   EXPECT_LE(m("vendor.beyond_right"), 0.01);
   EXPECT_GT(m("beyond.beyond_right"), 10.0 * std::max(0.01, m("paper.beyond_right")));
+  // The per-pixel ceiling bounds every single-frame method's F1 (a rule told each pixel's σ and
+  // systematic cause can do no worse than one that estimates them), and it is below 1 where
+  // noise alone makes pixels bad.
+  for (const char* method : {"paper", "vendor"}) {
+    EXPECT_LE(m(std::string(method) + ".f1"), m(std::string(method) + ".ceiling_f1")) << method;
+    EXPECT_LT(m(std::string(method) + ".ceiling_f1"), 1.0) << method;
+  }
 }
 
 TEST(ExperimentsTest, WritesCsvAndMarkdown) {
