@@ -47,6 +47,10 @@ void FramePairOptions::Validate() const {
     Bad("frame pair max_amplitude_disagreement_sigma = " +
         std::to_string(max_amplitude_disagreement_sigma) + " must be in [0, 1000] (0: no check)");
   }
+  if (!(max_motion_m >= 0.0 && max_motion_m <= 10.0)) {
+    Bad("frame pair max_motion_m = " + std::to_string(max_motion_m) +
+        " must be in [0, 10] (0: no motion allowed)");
+  }
   if (!(min_amplitude_tolerance >= 0.0 && min_amplitude_tolerance <= 1.0)) {
     Bad("frame pair min_amplitude_tolerance = " + std::to_string(min_amplitude_tolerance) +
         " must be in [0, 1]");
@@ -113,6 +117,8 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
     }
   }
   const double log_floor = std::log1p(options.min_amplitude_tolerance);
+  // Within half the wrap separation a motion's own pair is the only one that close.
+  const double motion_bound = std::min(options.max_motion_m, 0.5 * std::abs(l1 - l2));
   for (std::size_t i = 0; i < n; ++i) {
     const bool ok1 = Good(previous, i), ok2 = Good(current, i);
     if (!ok1 && !ok2) continue;
@@ -137,8 +143,9 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
                                       options.min_tolerance_m);
     double a = d1, b = d2;
     bool ambiguous = false;
+    double second = 1e300;  // the second-best pair's disagreement (two frequencies)
     if (dual) {
-      double best = 1e300, second = 1e300;
+      double best = 1e300;
       for (int n1 = 0; n1 <= max_n1; ++n1) {
         const double e1 = d1 + n1 * l1;
         const double n2 = std::max(0.0, std::round((e1 - d2) / l2));
@@ -171,7 +178,14 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
         two_returns = std::abs(log_ratio - median_log_ratio) > allowed;
       }
     }
-    if (!(std::abs(a - b) <= tolerance) || ambiguous || moved || two_returns) {
+    const bool disagree = !(std::abs(a - b) <= tolerance);
+    if (dual && disagree && std::abs(a - b) <= motion_bound && !(second <= motion_bound) &&
+        !moved && !two_returns) {
+      // Motion: one wrap count explains it; the average would be neither reading.
+      current.radial_distance_m[i] = static_cast<float>(b);
+      continue;
+    }
+    if (disagree || ambiguous || moved || two_returns) {
       current.flags[i] |= Flag::kInconsistent;
       if (dual) current.radial_distance_m[i] = static_cast<float>(b);
       continue;

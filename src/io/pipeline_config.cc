@@ -161,6 +161,9 @@ void VisitOptions(V& v, PipelineOptions& o) {
                 "sums two returns; 0 = off, [0, 1000]");
         v.Field("min_amplitude_tolerance", o.frame_pair.min_amplitude_tolerance,
                 "floor of that tolerance, relative amplitude, [0, 1]");
+        v.Field("max_motion_m", o.frame_pair.max_motion_m,
+                "two frequencies: a disagreement up to this that leaves the wrap count certain "
+                "is motion (the current reading is kept); 0 = off, m, [0, 10]");
       });
   v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");

@@ -42,7 +42,9 @@ TEST(FramePair, DisagreementBeyondItsSigmaIsInconsistent) {
   // Second pixel moved 0.2 m between the frames; 4 σ of sqrt(2) x 1 cm is 5.7 cm.
   const MetricFrame a = Pixels(20e6, 3.0, 3.0, 0.01f);
   MetricFrame b = Pixels(17e6, 3.0, 3.2, 0.01f);
-  CombineFramePair(a, b);
+  FramePairOptions flag_motion;
+  flag_motion.max_motion_m = 0.0;
+  CombineFramePair(a, b, flag_motion);
   EXPECT_FALSE(b.flags[0].Has(Flag::kInconsistent));
   EXPECT_TRUE(b.flags[1].Has(Flag::kInconsistent));
   // One frequency alone cannot be unwrapped: a pixel rejected in one frame is inconsistent.
@@ -51,6 +53,39 @@ TEST(FramePair, DisagreementBeyondItsSigmaIsInconsistent) {
   MetricFrame d = Pixels(17e6, 3.0, 3.0, 0.01f);
   CombineFramePair(c, d);
   EXPECT_TRUE(d.flags[0].Has(Flag::kInconsistent));
+}
+
+TEST(FramePair, MotionThatLeavesTheWrapCountCertainKeepsTheNewestReading) {
+  // The surface moved from 9.0 m to 9.2 m between the frames (both beyond both ranges: 20 MHz
+  // reads 1.505 m, 17 MHz 0.383 m). The wrap counts (1, 1) agree best, by 0.2 m: beyond 4 σ
+  // (5.7 cm), within max_motion_m (0.25 m), and every other pair is over 1 m off: motion. The
+  // current (17 MHz) frame's reading is delivered unwrapped, 9.2 m, with its own ΔL (not the
+  // average 9.1 m) and not flagged.
+  // Pixel 1 jumped 0.9 m (9.0 -> 9.9 m: reads 1.505 and 1.083 m): now the pair (0, 0) agrees
+  // best, by 0.42 m, and the right one (1, 1) is 0.9 m off. Neither is within the motion bound:
+  // kInconsistent, not 1.08 m.
+  const MetricFrame a = Pixels(20e6, 9.0, 9.0, 0.01f);
+  MetricFrame b = Pixels(17e6, 9.2, 9.9, 0.01f);
+  CombineFramePair(a, b);
+  EXPECT_NEAR(b.radial_distance_m[0], 9.2, 1e-5);
+  EXPECT_FLOAT_EQ(b.delta_l_m[0], 0.01f);
+  EXPECT_FALSE(b.flags[0].Any(kRejectMask));
+  EXPECT_TRUE(b.flags[1].Has(Flag::kInconsistent));
+  // An amplitude per µs that more than doubled still says "moved": flagged within the bound.
+  MetricFrame c = Pixels(17e6, 9.2, 9.2, 0.01f);
+  c.amplitude[0] = 2500.0f;
+  CombineFramePair(a, c);
+  EXPECT_TRUE(c.flags[0].Has(Flag::kInconsistent));
+  EXPECT_FALSE(c.flags[1].Any(kRejectMask));
+  // The bound is an option: 0 flags every disagreement, as before.
+  FramePairOptions strict;
+  strict.max_motion_m = 0.0;
+  MetricFrame d = Pixels(17e6, 9.2, 9.0, 0.01f);
+  CombineFramePair(a, d, strict);
+  EXPECT_TRUE(d.flags[0].Has(Flag::kInconsistent));
+  EXPECT_NEAR(d.radial_distance_m[1], 9.0, 1e-5);
+  strict.max_motion_m = -1.0;
+  EXPECT_THROW(CombineFramePair(a, d, strict), Error);
 }
 
 TEST(FramePair, AmbiguousWrapCountsAreInconsistent) {

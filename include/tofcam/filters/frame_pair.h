@@ -10,12 +10,15 @@
 ///    is used; where both are good they are averaged with weights 1/σ² (σ = each frame's ΔL).
 /// Either way, a pixel whose two distances disagree by more than `max_disagreement_sigma`
 /// combined standard deviations (motion between the frames, multipath that differs between
-/// frequencies, a wrong wrap count) is flagged kInconsistent, and the pixel's ΔL becomes the
-/// combined σ. So is a pixel whose amplitude per µs changed by more than `max_amplitude_ratio`
-/// (it saw two surfaces) and, with two frequencies, one for which a second pair of wrap counts
-/// also agrees within the tolerance (noise too large to tell the pairs apart: ambiguous) or whose
-/// two amplitudes disagree beyond their noise (`max_amplitude_disagreement_sigma`: it sums two
-/// returns, a mixed pixel or two-path multipath).
+/// frequencies, a wrong wrap count) is flagged kInconsistent; where they agree the pixel's ΔL
+/// becomes the combined σ. With two frequencies, a disagreement of at most `max_motion_m` that
+/// leaves the wrap count certain is taken as motion instead: the current frame's own reading,
+/// unwrapped, is delivered with its own ΔL. So is a pixel
+/// whose amplitude per µs changed by more than `max_amplitude_ratio` (it saw two surfaces) and,
+/// with two frequencies, one for which a second pair of wrap counts also agrees within the
+/// tolerance (noise too large to tell the pairs apart: ambiguous) or whose two amplitudes disagree
+/// beyond their noise (`max_amplitude_disagreement_sigma`: it sums two returns, a mixed pixel or
+/// two-path multipath).
 ///
 /// Single-frequency wrap detection (WrapCheckFilter) is the fallback where only one frequency
 /// exists.
@@ -55,6 +58,19 @@ struct FramePairOptions {
   double max_amplitude_disagreement_sigma = 3.0;
   /// Floor of that tolerance as a relative amplitude difference, [0, 1].
   double min_amplitude_tolerance = 0.02;
+  /// Two frequencies only: largest motion between the two frames, m, [0, 10]; 0 = off. Where
+  /// the two unwrapped distances disagree beyond their tolerance by at most this much and no
+  /// other pair of wrap counts comes within it, the wrap count is certain and the disagreement
+  /// is motion (a robot's 2.5 cm per frame at 0.75 m/s and 30 frames/s is tens of σ for a bright
+  /// pixel): the current frame's reading, unwrapped, is delivered with its own ΔL instead of the
+  /// pixel being flagged kInconsistent. The amplitude checks (moved, two returns) still flag.
+  /// For a motion m, wrong pairs lie |L1 - L2| - m or more away, so every motion up to the bound
+  /// (capped at |L1 - L2| / 2) finds its own pair. A jump m beyond it (a pixel that switched
+  /// surfaces) stays kInconsistent unless |m - k |L1 - L2|| falls within the bound for some
+  /// k >= 1 (1.07-1.57 m for 20/17 MHz at the default 0.25 m, 7.5 m/s at 30 frames/s): then it
+  /// takes a wrong wrap count unless its amplitude change flags it. Measured in `tofcam
+  /// experiment beyond` (docs/beyond.md).
+  double max_motion_m = 0.25;
 
   void Validate() const;
 };
