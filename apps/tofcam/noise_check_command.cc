@@ -228,9 +228,9 @@ void RunNoiseCheck(const NoiseCheckOptions& o) {
   const NoiseModel& m = fit.model;
   std::printf(
       "fitted model (%s): ln sigma = %.4g %+.4g ln A %+.4g ln I %+.4g ln r %+.4g A/%.5g %+.4g "
-      "ln(1+C)\n",
+      "ln(1+C) %+.4g ln(1+E/%.3g m)\n",
       fit.features.c_str(), m.intercept, m.log_amplitude, m.log_intensity, m.log_distance,
-      m.amplitude_fraction, m.amplitude_ref, m.log_confidence);
+      m.amplitude_fraction, m.amplitude_ref, m.log_confidence, m.log_edge, m.edge_ref_m);
   std::printf("  decile  eq2_pred_mm  model_pred_mm  measured_mm\n");
   for (int d = 0; d < 10; ++d) {
     // The two predictors sort the pixels differently: each decile's measured σ is the model's.

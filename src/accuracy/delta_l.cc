@@ -129,13 +129,18 @@ void NoiseModel::Validate() const {
                                                          {log_intensity, "log_intensity"},
                                                          {log_distance, "log_distance"},
                                                          {amplitude_fraction, "amplitude_fraction"},
-                                                         {log_confidence, "log_confidence"}};
+                                                         {log_confidence, "log_confidence"},
+                                                         {log_edge, "log_edge"}};
   for (const auto& [value, name] : coefficients) {
     if (!std::isfinite(value) || std::abs(value) > 1e3) {
       throw Error(ErrorCode::kInvalidArgument, std::string("noise model ") + name + " = " +
                                                    std::to_string(value) +
                                                    " must be finite and within +-1e3");
     }
+  }
+  if (!(edge_ref_m > 0.0) || !std::isfinite(edge_ref_m)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "noise model edge_ref_m = " + std::to_string(edge_ref_m) + " must be > 0");
   }
   if (!(amplitude_ref > 0.0) || !std::isfinite(amplitude_ref)) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -144,14 +149,58 @@ void NoiseModel::Validate() const {
 }
 
 double PredictSigmaM(const NoiseModel& m, double amplitude, double intensity, double distance_m,
-                     double confidence) {
+                     double confidence, double edge_m) {
   if (!(amplitude > 0.0)) return std::numeric_limits<double>::infinity();
   double e = m.intercept + m.log_amplitude * std::log(amplitude) +
              m.amplitude_fraction * amplitude / m.amplitude_ref;
   if (m.log_intensity != 0.0) e += m.log_intensity * std::log(std::max(intensity, 1.0));
   if (m.log_distance != 0.0) e += m.log_distance * std::log(std::max(distance_m, 0.05));
   if (m.log_confidence != 0.0) e += m.log_confidence * std::log1p(std::max(confidence, 0.0));
+  if (m.log_edge != 0.0) e += m.log_edge * std::log1p(std::max(edge_m, 0.0) / m.edge_ref_m);
   return std::exp(e);
+}
+
+void LocalDepthVariation(const Image<float>& d, const Image<PixelFlags>& flags, Image<float>& out) {
+  const int w = d.width(), h = d.height();
+  if (!flags.empty() && !flags.SameSize(w, h)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "local depth variation: flags differ in size from the distances");
+  }
+  if (!out.SameSize(w, h)) out = Image<float>(w, h);
+  const auto usable = [&](std::size_t i) {
+    return std::isfinite(d[i]) && (flags.empty() || !flags[i].Any(kRejectMask));
+  };
+  for (int r = 0; r < h; ++r) {
+    for (int c = 0; c < w; ++c) {
+      const std::size_t i =
+          static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(c);
+      float e = 0.0f;
+      if (std::isfinite(d[i])) {
+        const auto take = [&](std::size_t n) {
+          if (usable(n)) e = std::max(e, std::abs(d[n] - d[i]));
+        };
+        if (c > 0) take(i - 1);
+        if (c + 1 < w) take(i + 1);
+        if (r > 0) take(i - static_cast<std::size_t>(w));
+        if (r + 1 < h) take(i + static_cast<std::size_t>(w));
+      }
+      out[i] = e;
+    }
+  }
+}
+
+void ApplyNoiseModelEdgeTerm(const NoiseModel& m, const Image<float>& distance_m,
+                             const Image<PixelFlags>& flags, Image<float>& delta_l) {
+  if (!m.uses_edges()) return;
+  if (!delta_l.SameSize(distance_m.width(), distance_m.height())) {
+    throw Error(ErrorCode::kInvalidArgument, "noise model edge term: ΔL differs in size");
+  }
+  thread_local Image<float> edge;
+  LocalDepthVariation(distance_m, flags, edge);
+  for (std::size_t i = 0; i < delta_l.size(); ++i) {
+    delta_l[i] =
+        static_cast<float>(delta_l[i] * std::pow(1.0 + edge[i] / m.edge_ref_m, m.log_edge));
+  }
 }
 
 namespace kernels {
@@ -204,6 +253,8 @@ void ComputeDeltaLInto(const MetricFrame& frame, const AccuracyOptions& options,
   kernels::DeltaLSpan(plan, out.size(), frame.radial_distance_m.data(), frame.amplitude.data(),
                       frame.has_intensity() ? frame.intensity.data() : nullptr,
                       frame.confidence.empty() ? nullptr : frame.confidence.data(), out.data());
+  if (options.model)
+    ApplyNoiseModelEdgeTerm(*options.model, frame.radial_distance_m, frame.flags, out);
 }
 
 DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,

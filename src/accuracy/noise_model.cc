@@ -21,6 +21,7 @@ namespace {
 // One usable pixel: its measured σ and the per-pixel temporal means of its channels.
 struct PixelSample {
   double sigma_m, amplitude, intensity, distance_m, confidence, eq2_m;
+  double edge_m;   // local depth variation, the mean over the frames of each frame's
   bool training;   // in the training half (else held out)
   bool selection;  // training pixel that scores the choice of channels
 };
@@ -32,13 +33,14 @@ struct Features {
   bool eq2_base = false;
   bool has_intensity = false;  // the frames have an intensity channel
   double intensity_per_amplitude = 2.5;
-  bool distance = false, saturation = false, confidence = false;
+  bool distance = false, saturation = false, confidence = false, edges = false;
   double amplitude_ref = 1.0;
+  double edge_ref_m = 0.01;
 
   [[nodiscard]] bool free_intensity() const { return !eq2_base && has_intensity; }
   [[nodiscard]] int count() const {
     return 1 + (eq2_base ? 0 : 1) + int{free_intensity()} + int{distance} + int{saturation} +
-           int{confidence};
+           int{confidence} + int{edges};
   }
   // The fixed part of ln σ (eq. 2's slopes), 0 with free slopes.
   [[nodiscard]] double Offset(const PixelSample& p) const {
@@ -54,6 +56,7 @@ struct Features {
     if (distance) out[k++] = std::log(std::max(p.distance_m, 0.05));
     if (saturation) out[k++] = p.amplitude / amplitude_ref;
     if (confidence) out[k++] = std::log1p(std::max(p.confidence, 0.0));
+    if (edges) out[k++] = std::log1p(std::max(p.edge_m, 0.0) / edge_ref_m);
   }
   [[nodiscard]] NoiseModel ToModel(const Eigen::VectorXd& beta) const {
     NoiseModel m;
@@ -71,7 +74,9 @@ struct Features {
     if (distance) m.log_distance = beta[k++];
     if (saturation) m.amplitude_fraction = beta[k++];
     if (confidence) m.log_confidence = beta[k++];
+    if (edges) m.log_edge = beta[k++];
     m.amplitude_ref = amplitude_ref;
+    m.edge_ref_m = edge_ref_m;
     return m;
   }
   [[nodiscard]] std::string Names() const {
@@ -79,6 +84,7 @@ struct Features {
     if (distance) s += ", ln r";
     if (saturation) s += ", A/A_ref";
     if (confidence) s += ", ln(1+C)";
+    if (edges) s += ", ln(1+E/E_ref)";
     return s;
   }
 };
@@ -183,7 +189,8 @@ double Eq2Scale(const std::vector<const PixelSample*>& pixels) {
 void MatchVariance(NoiseModel& m, const std::vector<const PixelSample*>& rows) {
   double pred2 = 0.0, meas2 = 0.0;
   for (const PixelSample* p : rows) {
-    const double q = PredictSigmaM(m, p->amplitude, p->intensity, p->distance_m, p->confidence);
+    const double q =
+        PredictSigmaM(m, p->amplitude, p->intensity, p->distance_m, p->confidence, p->edge_m);
     pred2 += q * q;
     meas2 += p->sigma_m * p->sigma_m;
   }
@@ -268,6 +275,15 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
   const double n = static_cast<double>(frames.size());
   const std::vector<std::uint8_t> clipped =
       accuracy_internal::ClippedInAnyFrame(frames, options.saturation);
+  // The edge channel: each frame's local depth variation, averaged (ΔL sees one frame's).
+  std::vector<double> edge_sum(static_cast<std::size_t>(w) * static_cast<std::size_t>(h), 0.0);
+  if (options.use_edges) {
+    Image<float> e;
+    for (const MetricFrame& f : frames) {
+      LocalDepthVariation(f.radial_distance_m, f.flags, e);
+      for (std::size_t i = 0; i < edge_sum.size(); ++i) edge_sum[i] += e[i];
+    }
+  }
   std::vector<PixelSample> samples;
   for (int r = 0; r < h; ++r) {
     for (int c = 0; c < w; ++c) {
@@ -284,6 +300,7 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
         if (has_intensity) p.intensity += f.intensity[i];
         if (has_confidence) p.confidence += f.confidence[i];
       }
+      p.edge_m = edge_sum[i] / n;
       p.amplitude /= n;
       p.intensity /= n;
       p.distance_m /= n;
@@ -343,6 +360,10 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
     std::vector<double> amplitudes;
     for (const PixelSample* p : train) amplitudes.push_back(p->amplitude);
     base.amplitude_ref = std::max(Percentile(amplitudes, 0.99), 1e-9);
+    std::vector<double> edges;
+    for (const PixelSample* p : train) edges.push_back(p->edge_m);
+    const double median_edge = Percentile(edges, 0.5);
+    base.edge_ref_m = median_edge > 1e-6 ? median_edge : 0.01;
   }
   struct Scored {
     Features features;
@@ -353,7 +374,8 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
     MatchVariance(m, fit_part);
     std::vector<double> pred;
     for (const PixelSample* p : select_part) {
-      pred.push_back(PredictSigmaM(m, p->amplitude, p->intensity, p->distance_m, p->confidence));
+      pred.push_back(
+          PredictSigmaM(m, p->amplitude, p->intensity, p->distance_m, p->confidence, p->edge_m));
     }
     return Scored{f, Validate("", pred, select_part, true)};
   };
@@ -374,12 +396,16 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
     Scored current = score(f);
     while (true) {  // forward selection of the optional channels
       std::optional<Scored> step;
-      for (int extra = 0; extra < 3; ++extra) {
+      for (int extra = 0; extra < 4; ++extra) {
         Features g = current.features;
-        bool* flag = extra == 0 ? &g.distance : extra == 1 ? &g.saturation : &g.confidence;
+        bool* flag = extra == 0   ? &g.distance
+                     : extra == 1 ? &g.saturation
+                     : extra == 2 ? &g.confidence
+                                  : &g.edges;
         const bool allowed = extra == 0   ? options.use_distance
                              : extra == 1 ? options.use_saturation
-                                          : options.use_confidence && has_confidence;
+                             : extra == 2 ? options.use_confidence && has_confidence
+                                          : options.use_edges;
         if (*flag || !allowed) continue;
         *flag = true;
         Scored candidate = score(g);
@@ -404,8 +430,8 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
   const double trained_scale = Eq2Scale(train);
   std::vector<double> model_pred, eq2_pred, vendor_pred;
   for (const PixelSample* p : test) {
-    model_pred.push_back(
-        PredictSigmaM(trained, p->amplitude, p->intensity, p->distance_m, p->confidence));
+    model_pred.push_back(PredictSigmaM(trained, p->amplitude, p->intensity, p->distance_m,
+                                       p->confidence, p->edge_m));
     eq2_pred.push_back(trained_scale * p->eq2_m);
     vendor_pred.push_back(-p->confidence);
   }

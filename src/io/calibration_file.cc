@@ -24,7 +24,9 @@ std::vector<std::pair<std::string, double>> NoiseModelFields(const NoiseModel& m
           {"log_distance", m.log_distance},
           {"amplitude_fraction", m.amplitude_fraction},
           {"amplitude_ref", m.amplitude_ref},
-          {"log_confidence", m.log_confidence}};
+          {"log_confidence", m.log_confidence},
+          {"log_edge", m.log_edge},
+          {"edge_ref_m", m.edge_ref_m}};
 }
 
 constexpr const char* kFormatTag = "tofcam-calibration";
@@ -329,6 +331,11 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
       m.amplitude_ref = in.Double(in.Required(model, "amplitude_ref"), "noise.model.amplitude_ref");
       m.log_confidence =
           in.Double(in.Required(model, "log_confidence"), "noise.model.log_confidence");
+      // The edge channel came later: files without it have none.
+      if (model["log_edge"]) m.log_edge = in.Double(model["log_edge"], "noise.model.log_edge");
+      if (model["edge_ref_m"]) {
+        m.edge_ref_m = in.Double(model["edge_ref_m"], "noise.model.edge_ref_m");
+      }
       try {
         m.Validate();
       } catch (const Error& e) {

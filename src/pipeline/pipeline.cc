@@ -174,7 +174,10 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
       filters.flying_pixel_enabled || filters.jump_edge_enabled || filters.weingarten_enabled;
   // Smoothing and the temporal filter change distances after the filters: the cloud follows.
   const bool confidence = filters.confidence_enabled && !frame.confidence.empty();
-  const bool late_cloud = neighbourhood || confidence || options_.smoothing_enabled ||
+  // A noise model with an edge term makes ΔL a neighbourhood quantity: finished after the pass.
+  const bool edge_term = options_.accuracy_enabled && options_.accuracy.model.has_value() &&
+                         options_.accuracy.model->uses_edges();
+  const bool late_cloud = edge_term || neighbourhood || confidence || options_.smoothing_enabled ||
                           temporal_.has_value() || pair_.has_value() ||
                           options_.uncertainty_enabled;
   MetricFrame& m = result.frame;
@@ -201,6 +204,22 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   out.filter_flags = &result.filter_flags;
   out.cloud = &result.cloud;
   pipeline_internal::RunFusedPass(frame, s, out);
+  if (edge_term) {
+    ApplyNoiseModelEdgeTerm(*options_.accuracy.model, m.radial_distance_m, result.input_flags,
+                            m.delta_l_m);
+    if (filters.accuracy_enabled) {
+      // The pass judged ΔL without the edge term: judge again.
+      const std::uint16_t high = static_cast<std::uint16_t>(Flag::kHighDeltaL);
+      const Image<PixelFlags> raised = AccuracyThresholdFilter(m, filters.accuracy);
+      for (std::size_t i = 0; i < raised.size(); ++i) {
+        const auto keep = static_cast<std::uint16_t>(~high);
+        m.flags[i] = PixelFlags(
+            static_cast<std::uint16_t>((m.flags[i].bits() & keep) | (raised[i].bits() & high)));
+        result.filter_flags[i] = PixelFlags(static_cast<std::uint16_t>(
+            (result.filter_flags[i].bits() & keep) | (raised[i].bits() & high)));
+      }
+    }
+  }
   if (confidence) {
     // The vendor channel is read by few sources, so it stays out of the fused pass.
     ConfidenceThresholdInto(m, filters.confidence, result.filter_flags);

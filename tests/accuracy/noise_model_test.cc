@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "tofcam/core/error.h"
@@ -177,6 +178,87 @@ TEST(NoiseModel, DeltaLStageOutputsTheModelsSigma) {
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::kMismatch);
   }
+}
+
+TEST(NoiseModel, UsesTheLocalDepthVariationWhereEdgesAreNoisier) {
+  // Steps of 0.5 m every 8 columns; the two columns beside each step jitter 3x more than the
+  // channels say (flying pixels), the rest follow σ = 0.6 ΔL of eq. 2. Only the local depth
+  // variation sees the step: the fit must select it, rank better than eq. 2 and predict every
+  // decile within 15 %, where eq. 2 misses the edge pixels' decile.
+  Scene s = MakeScene(14, [](double a, double in, double) { return 0.6 * Eq2(a, in); });
+  for (int i = 0; i < kW * kH; ++i) {
+    const int c = i % kW;
+    s.distance_m[static_cast<std::size_t>(i)] = 2.0 + 0.5 * (c / 8);
+    s.amplitude[static_cast<std::size_t>(i)] = 2000.0 + 8000.0 * ((i * 7919) % 1000) / 1000.0;
+    s.intensity[static_cast<std::size_t>(i)] = 2.5 * s.amplitude[static_cast<std::size_t>(i)];
+    const bool edge = c % 8 == 0 || c % 8 == 7;
+    s.sigma_m[static_cast<std::size_t>(i)] =
+        0.6 *
+        Eq2(s.amplitude[static_cast<std::size_t>(i)], s.intensity[static_cast<std::size_t>(i)]) *
+        (edge && c > 0 && c + 1 < kW ? 3.0 : 1.0);
+  }
+  const auto frames = Frames(s, 20, 15);
+  const NoiseModelFit fit = FitNoiseModel(frames);
+  EXPECT_NE(fit.features.find("ln(1+E/E_ref)"), std::string::npos) << fit.features;
+  EXPECT_GT(fit.model.log_edge, 0.0);
+  EXPECT_GT(fit.fitted.spearman, fit.eq2.spearman + 0.05);
+  EXPECT_LT(fit.fitted.max_decile_error, 0.15);
+  // Eq. 2's deciles cannot show it (every decile holds edge pixels alike); per pixel, the
+  // model predicts both groups' true σ: median predicted / true within 15 % for each.
+  std::vector<double> mean_edge(s.amplitude.size(), 0.0);
+  Image<float> e;
+  for (const MetricFrame& f : frames) {
+    LocalDepthVariation(f.radial_distance_m, f.flags, e);
+    for (std::size_t i = 0; i < mean_edge.size(); ++i) mean_edge[i] += e[i] / frames.size();
+  }
+  std::vector<double> ratio[2];
+  for (std::size_t i = 0; i < s.amplitude.size(); ++i) {
+    const int c = static_cast<int>(i) % kW;
+    const bool edge = (c % 8 == 0 || c % 8 == 7) && c > 0 && c + 1 < kW;
+    ratio[edge].push_back(PredictSigmaM(fit.model, s.amplitude[i], s.intensity[i], s.distance_m[i],
+                                        0.0, mean_edge[i]) /
+                          s.sigma_m[i]);
+  }
+  for (auto& r : ratio) {
+    std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+    EXPECT_NEAR(r[r.size() / 2], 1.0, 0.15);
+  }
+  NoiseModelFitOptions no_edges;
+  no_edges.use_edges = false;
+  EXPECT_EQ(FitNoiseModel(frames, no_edges).model.log_edge, 0.0);
+}
+
+TEST(NoiseModel, EdgeTermByHand) {
+  // 3 x 2 distances; pixel (0, 1) = 2.0 m has neighbours 2.3 (left... right), 1.0 (below) and a
+  // rejected 9 m (ignored): E = |1.0 - 2.0| = 1.0 m. The edge term multiplies ΔL by
+  // (1 + E / E_ref)^c_E = (1 + 1 / 0.5)^0.5 = sqrt(3).
+  MetricFrame f;
+  f.radial_distance_m = Image<float>(3, 2);
+  f.amplitude = Image<float>(3, 2, 1000.0f);
+  f.intensity = Image<float>(3, 2, 2500.0f);
+  f.flags = Image<PixelFlags>(3, 2);
+  f.info.modulation_frequency_hz = 20e6;
+  const float d[] = {9.0f, 2.0f, 2.3f, 2.1f, 1.0f, 2.2f};
+  for (int i = 0; i < 6; ++i) f.radial_distance_m[static_cast<std::size_t>(i)] = d[i];
+  f.flags[0] = PixelFlags(Flag::kSaturated);
+  Image<float> e;
+  LocalDepthVariation(f.radial_distance_m, f.flags, e);
+  EXPECT_FLOAT_EQ(e[1], 1.0f);  // max(|2.3-2|, |1-2|), the saturated 9 m left out
+  EXPECT_FLOAT_EQ(e[3], 1.1f);  // (1, 0): right 1.0, up the saturated one ignored
+  EXPECT_FLOAT_EQ(e[0], 7.0f);  // its own value counts; neighbours 2.0 and 2.1
+  NoiseModel m;
+  m.intercept = -3.0;
+  m.log_amplitude = -0.5;
+  m.log_edge = 0.5;
+  m.edge_ref_m = 0.5;
+  AccuracyOptions options;
+  options.model = m;
+  const Image<float> dl = ComputeDeltaL(f, options);
+  const double base = std::exp(-3.0 - 0.5 * std::log(1000.0));
+  EXPECT_NEAR(dl[1], base * std::sqrt(3.0), 1e-6 * base);
+  EXPECT_NEAR(PredictSigmaM(m, 1000.0, 2500.0, 2.0, 0.0, 1.0), base * std::sqrt(3.0), 1e-12);
+  m.edge_ref_m = 0.0;
+  EXPECT_THROW(m.Validate(), Error);
 }
 
 TEST(NoiseModel, LeavesOutPixelsClippedInAnyFrame) {

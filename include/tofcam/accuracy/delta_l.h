@@ -32,18 +32,38 @@ struct NoiseModel {
   double amplitude_fraction = 0.0;  ///< c_sat, slope in A / amplitude_ref (saturation proximity).
   double amplitude_ref = 1.0;       ///< A_ref, register units, > 0 (the fit's 99th percentile).
   double log_confidence = 0.0;  ///< c_C, slope in ln(1 + C); non-zero needs a confidence channel.
+  /// c_E, slope in ln(1 + E / edge_ref_m), E = the pixel's local depth variation (m,
+  /// LocalDepthVariation): pixels at depth edges (flying pixels) can be noisier than their
+  /// channels say. Non-zero makes ΔL a neighbourhood quantity.
+  double log_edge = 0.0;
+  double edge_ref_m = 0.01;  ///< E_ref, m, > 0 (the fit's median E).
 
   [[nodiscard]] bool uses_intensity() const noexcept { return log_intensity != 0.0; }
   [[nodiscard]] bool uses_confidence() const noexcept { return log_confidence != 0.0; }
+  [[nodiscard]] bool uses_edges() const noexcept { return log_edge != 0.0; }
   /// Throws Error(kInvalidArgument) naming the field unless every value is finite, every
   /// coefficient within ±1e3 and amplitude_ref > 0.
   void Validate() const;
 };
 
 /// Predicted σ (m) of one pixel. Amplitude <= 0 or NaN gives +inf (as eq. 2); intensity is
-/// floored at 1, distance at 0.05 m, confidence at 0.
+/// floored at 1, distance at 0.05 m, confidence and local depth variation `edge_m` at 0.
 [[nodiscard]] double PredictSigmaM(const NoiseModel& model, double amplitude, double intensity,
-                                   double distance_m, double confidence);
+                                   double distance_m, double confidence, double edge_m = 0.0);
+
+/// Local depth variation E per pixel, m: the largest |d - d_n| over its 4-neighbours n whose
+/// distance is finite and that carry no reject flag (kRejectMask; `flags` may be empty). 0 where
+/// no such neighbour exists or the pixel's own distance is not finite. The noise model's edge
+/// channel.
+void LocalDepthVariation(const Image<float>& distance_m, const Image<PixelFlags>& flags,
+                         Image<float>& out);
+
+/// Multiplies `delta_l` (the model's σ without its edge term) by (1 + E / E_ref)^c_E, E from
+/// `distance_m` and `flags` (LocalDepthVariation); nothing when the model has no edge term.
+/// ComputeDeltaL and the Pipeline call it after the per-pixel terms. Throws
+/// Error(kInvalidArgument) for images of different sizes.
+void ApplyNoiseModelEdgeTerm(const NoiseModel& model, const Image<float>& distance_m,
+                             const Image<PixelFlags>& flags, Image<float>& delta_l);
 
 struct AccuracyOptions {
   /// Multiplies eq. 2; 1 is the paper's formula, FitDeltaLScale() measures the camera's value.

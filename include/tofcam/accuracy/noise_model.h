@@ -41,6 +41,9 @@ struct NoiseModelFitOptions {
   bool use_distance = true;
   bool use_saturation = true;
   bool use_confidence = true;
+  /// The local depth variation (LocalDepthVariation, each frame's, averaged): pixels at depth
+  /// edges may jitter beyond what their amplitude says (flying pixels).
+  bool use_edges = true;
   /// Pixels whose eq. 2 σ (at the median σ / ΔL) exceeds this fraction of L are left out, as in
   /// FitDeltaLScale: near-dark pixels whose phase wraps. The cut is on the predictor, not on the
   /// measured σ, so it does not bias the fit. (0, inf].
