@@ -42,7 +42,7 @@ struct NoiseModel {
   [[nodiscard]] bool uses_confidence() const noexcept { return log_confidence != 0.0; }
   [[nodiscard]] bool uses_edges() const noexcept { return log_edge != 0.0; }
   /// Throws Error(kInvalidArgument) naming the field unless every value is finite, every
-  /// coefficient within ±1e3 and amplitude_ref > 0.
+  /// coefficient within ±1e3 and amplitude_ref, edge_ref_m > 0.
   void Validate() const;
 };
 

@@ -13,12 +13,12 @@
 /// frequencies, a wrong wrap count) is flagged kInconsistent; where they agree the pixel's ΔL
 /// becomes the combined σ. With two frequencies, a disagreement of at most `max_motion_m` that
 /// leaves the wrap count certain is taken as motion instead: the current frame's own reading,
-/// unwrapped, is delivered with its own ΔL. So is a pixel
-/// whose amplitude per µs changed by more than `max_amplitude_ratio` (it saw two surfaces) and,
-/// with two frequencies, one for which a second pair of wrap counts also agrees within the
-/// tolerance (noise too large to tell the pairs apart: ambiguous) or whose two amplitudes disagree
-/// beyond their noise (`max_amplitude_disagreement_sigma`: it sums two returns, a mixed pixel or
-/// two-path multipath).
+/// unwrapped, is delivered with its own ΔL. A pixel is also flagged kInconsistent when its
+/// amplitude per µs changed by more than `max_amplitude_ratio` (it saw two surfaces) and, with
+/// two frequencies, when a second pair of wrap counts also agrees within the tolerance (noise too
+/// large to tell the pairs apart: ambiguous) or its two amplitudes disagree beyond their noise
+/// (`max_amplitude_disagreement_sigma`: it sums two returns, a mixed pixel or two-path
+/// multipath).
 ///
 /// Single-frequency wrap detection (WrapCheckFilter) is the fallback where only one frequency
 /// exists.
