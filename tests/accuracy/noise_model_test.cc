@@ -259,6 +259,7 @@ TEST(NoiseModel, EdgeTermByHand) {
   EXPECT_NEAR(PredictSigmaM(m, 1000.0, 2500.0, 2.0, 0.0, 1.0), base * std::sqrt(3.0), 1e-12);
   m.edge_ref_m = 0.0;
   EXPECT_THROW(m.Validate(), Error);
+  EXPECT_THROW(LocalDepthVariation(f.radial_distance_m, Image<PixelFlags>(2, 2), e), Error);
 }
 
 TEST(NoiseModel, LeavesOutPixelsClippedInAnyFrame) {

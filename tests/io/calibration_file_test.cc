@@ -69,6 +69,8 @@ OffsetCalibration Sample() {
   model.amplitude_fraction = 0.25;
   model.amplitude_ref = 24381.5;
   model.log_confidence = -0.0625;
+  model.log_edge = 0.3125;
+  model.edge_ref_m = 0.0078125;
   c.noise->model = model;
   c.noise->model_spearman = 0.875;
   c.noise->eq2_spearman = 0.75;
@@ -130,6 +132,8 @@ void ExpectSame(const OffsetCalibration& a, const OffsetCalibration& b) {
       EXPECT_EQ(x.amplitude_fraction, y.amplitude_fraction);
       EXPECT_EQ(x.amplitude_ref, y.amplitude_ref);
       EXPECT_EQ(x.log_confidence, y.log_confidence);
+      EXPECT_EQ(x.log_edge, y.log_edge);
+      EXPECT_EQ(x.edge_ref_m, y.edge_ref_m);
       EXPECT_EQ(a.noise->model_spearman, b.noise->model_spearman);
       EXPECT_EQ(a.noise->eq2_spearman, b.noise->eq2_spearman);
       EXPECT_EQ(a.noise->model_max_decile_error, b.noise->model_max_decile_error);
@@ -270,6 +274,24 @@ TEST(CalibrationFileTest, RejectsEveryMalformedField) {
   ExpectRejected("log_confidence: -0.0625", "log_confidence: -0.0625\n    slope: 1",
                  "unknown key 'slope'");
   ExpectRejected("held_out_spearman: 0.875", "held_out_spearman: 2", "spearman");
+  ExpectRejected("edge_ref_m: 0.0078125", "edge_ref_m: 0", "edge_ref_m");
+  ExpectRejected("log_edge: 0.3125", "log_edge: .nan", "log_edge");
+  // Files written before the edge channel have neither key: no edge term.
+  {
+    const fs::path p = Temp("no_edge.yaml");
+    SaveCalibration(p, Sample());
+    std::string text = ReadFile(p);
+    for (const std::string key : {"    log_edge: 0.3125\n", "    edge_ref_m: 0.0078125\n"}) {
+      const auto at = text.find(key);
+      ASSERT_NE(at, std::string::npos) << text;
+      text.erase(at, key.size());
+    }
+    WriteFileAtomically(p, text);
+    const OffsetCalibration old = LoadCalibration(p);
+    ASSERT_TRUE(old.noise && old.noise->model);
+    EXPECT_EQ(old.noise->model->log_edge, 0.0);
+    EXPECT_FALSE(old.noise->model->uses_edges());
+  }
   ExpectRejected("bias_register: 151", "bias_register: 0", "bias_register = 0 is outside");
   ExpectRejected("target_intensity: 28531.25", "target_intensity: 70000", "(0, 65532]");
   ExpectRejected("gain_register_per_intensity: 0.00390625", "gain_register_per_intensity: 2",
