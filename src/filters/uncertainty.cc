@@ -39,30 +39,52 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     return !frame.flags[i].Any(kRejectMask) && std::isfinite(frame.radial_distance_m[i]) &&
            std::isfinite(frame.delta_l_m[i]);
   };
+  // How far pixel i lies off the straight line through its two neighbours in direction
+  // (dr, dc), m: 0 when that deviation is within min_jump_sigma of its σ (sqrt(σ_i² + 4 σ_a² +
+  // σ_b²)); NaN when either neighbour is outside the image or unusable.
+  const auto off_line = [&](int r, int c, int dr, int dc, std::size_t i) -> double {
+    const int r1 = r + dr, c1 = c + dc, r2 = r + 2 * dr, c2 = c + 2 * dc;
+    if (r2 < 0 || r2 >= h || c2 < 0 || c2 >= w) return std::numeric_limits<double>::quiet_NaN();
+    const std::size_t a = static_cast<std::size_t>(r1) * w + c1;
+    const std::size_t b = static_cast<std::size_t>(r2) * w + c2;
+    if (!usable(a) || !usable(b)) return std::numeric_limits<double>::quiet_NaN();
+    const double dev = std::abs(static_cast<double>(frame.radial_distance_m[i]) -
+                                2.0 * frame.radial_distance_m[a] + frame.radial_distance_m[b]);
+    const double si = frame.delta_l_m[i], sa = frame.delta_l_m[a], sb = frame.delta_l_m[b];
+    return dev > options.min_jump_sigma * std::sqrt(si * si + 4 * sa * sa + sb * sb) ? dev : 0.0;
+  };
   Image<float> out(w, h, kInf);
   for (int r = 0; r < h; ++r) {
     for (int c = 0; c < w; ++c) {
       const std::size_t i = static_cast<std::size_t>(r) * w + c;
       if (!usable(i)) continue;
       const double d = frame.radial_distance_m[i], s = frame.delta_l_m[i];
-      double jump = 0.0;
+      double edge = 0.0;  // m
       const int dr[4] = {-1, 1, 0, 0}, dc[4] = {0, 0, -1, 1};
       for (int k = 0; k < 4; ++k) {
         const int rr = r + dr[k], cc = c + dc[k];
         if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
         const std::size_t j = static_cast<std::size_t>(rr) * w + cc;
         if (frame.flags[j].Any(options.unknown_neighbour_flags)) {
-          jump = std::numeric_limits<double>::infinity();
+          edge = std::numeric_limits<double>::infinity();
           break;
         }
         if (!usable(j)) continue;
-        const double step = std::abs(frame.radial_distance_m[j] - d);
+        const double dj = frame.radial_distance_m[j];
+        const double step = std::abs(dj - d);
         const double sj = frame.delta_l_m[j];
-        if (step > options.min_jump_sigma * std::sqrt(s * s + sj * sj)) jump = std::max(jump, step);
+        if (!(step > options.min_jump_sigma * std::sqrt(s * s + sj * sj))) continue;
+        double e = options.edge_fraction * step;
+        if (options.extrapolate_edges) {
+          // The step's other side is the neighbour's business; this pixel is wrong only as far
+          // as it leaves its own side's surface (a mixed pixel) or that is unknown.
+          const double dev = off_line(r, c, -dr[k], -dc[k], i);
+          if (!std::isnan(dev)) e = dev;
+        }
+        edge = std::max(edge, e);
       }
-      if (std::isinf(jump)) continue;  // next to a clipped pixel: unbounded
-      const double e = options.edge_fraction * jump;
-      out[i] = static_cast<float>(std::sqrt(s * s + e * e));
+      if (std::isinf(edge)) continue;  // next to a clipped pixel: unbounded
+      out[i] = static_cast<float>(std::sqrt(s * s + edge * edge));
     }
   }
   return out;

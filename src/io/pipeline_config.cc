@@ -116,6 +116,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("max_uncertainty_m", o.uncertainty.max_uncertainty_m, "m, (0, 100]");
     v.Field("edge_fraction", o.uncertainty.edge_fraction, "part of an edge's jump, [0, 1]");
     v.Field("min_jump_sigma", o.uncertainty.min_jump_sigma, "steps below are noise, (0, 100]");
+    v.Field("extrapolate_edges", o.uncertainty.extrapolate_edges,
+            "edge term: how far the pixel leaves its own side's line, not a part of the step");
     v.Field("unknown_neighbour_flags", FlagMask{o.uncertainty.unknown_neighbour_flags},
             "a pixel next to one with any of these flags is flagged");
   });

@@ -38,6 +38,39 @@ TEST(Uncertainty, EdgesAddHalfTheirJump) {
   EXPECT_TRUE(UncertaintyFilter(Row({3.0f}, 0.06f))[0].Has(Flag::kLowConfidence));
 }
 
+TEST(Uncertainty, ExtrapolatedEdgesChargeOnlyWhatLeavesTheOwnSurface) {
+  // 1, 1, 1 | 1.5 (a mixed pixel) | 2, 2, 2 with σ 1 cm. Pixel 2 continues its line (1, 1): 0
+  // off it, so its noise alone although it is next to a 0.5 m step. Pixel 3 is 0.5 m off the
+  // line of 1, 1 and 0.5 m off that of 2, 2: u = sqrt(0.01² + 0.5²). A slope (steps of 10 cm, a
+  // straight line) has no edge term at all, where the step rule charges half of each step.
+  UncertaintyOptions on;
+  on.extrapolate_edges = true;
+  MetricFrame m = Row({1.0f, 1.0f, 1.0f, 1.5f, 2.0f, 2.0f, 2.0f}, 0.01f);
+  Image<float> u = ComputeUncertainty(m, on);
+  EXPECT_NEAR(u[2], 0.01, 1e-6);
+  EXPECT_NEAR(u[3], std::sqrt(0.0001 + 0.25), 1e-6);
+  EXPECT_NEAR(u[4], 0.01, 1e-6);
+  EXPECT_NEAR(u[1], 0.01, 1e-6);
+  const Image<float> step_rule = ComputeUncertainty(m);
+  EXPECT_NEAR(step_rule[2], std::sqrt(0.0001 + 0.0625), 1e-6);
+  // Pixel 2 of a 5-pixel slope has a line on both sides: no edge term. Pixels 0, 1, 3 and 4
+  // have a 10 cm step towards a side where their own line runs out of the image: the step rule.
+  m = Row({1.0f, 1.1f, 1.2f, 1.3f, 1.4f}, 0.01f);
+  u = ComputeUncertainty(m, on);
+  for (int i = 0; i < 5; ++i) {
+    const double expected = i == 2 ? 0.01 : std::sqrt(0.0001 + 0.0025);
+    EXPECT_NEAR(u[i], expected, 1e-6) << i;
+  }
+  EXPECT_NEAR(ComputeUncertainty(m)[2], std::sqrt(0.0001 + 0.0025), 1e-6);
+  // Off the line by less than 3 sqrt(6) σ = 7.3 cm is noise: 1, 1, 1.03 | 2 charges pixel 2
+  // nothing (its 3 cm step back is no edge either); by 10 cm (1, 1, 1.1 | 2) it charges the
+  // 10 cm (more than the step rule's 5 cm for the step back, whose own line is outside).
+  m = Row({1.0f, 1.0f, 1.03f, 2.0f}, 0.01f);
+  EXPECT_NEAR(ComputeUncertainty(m, on)[2], 0.01, 1e-6);
+  m = Row({1.0f, 1.0f, 1.1f, 2.0f}, 0.01f);
+  EXPECT_NEAR(ComputeUncertainty(m, on)[2], std::sqrt(0.0001 + 0.01), 1e-6);
+}
+
 TEST(Uncertainty, RejectedPixelsAreInfiniteAndNotNeighbours) {
   MetricFrame m = Row({1.0f, 5.0f, 1.0f, 1.0f}, 0.01f);
   m.flags[1] = PixelFlags(Flag::kLowAmplitude);

@@ -70,6 +70,12 @@ void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(ca.vendor_deadband, cb.vendor_deadband);
   EXPECT_EQ(ca.loop_gain, cb.loop_gain);
   EXPECT_EQ(ca.frame_rate_hz, cb.frame_rate_hz);
+  EXPECT_EQ(a.uncertainty_enabled, b.uncertainty_enabled);
+  EXPECT_EQ(a.uncertainty.max_uncertainty_m, b.uncertainty.max_uncertainty_m);
+  EXPECT_EQ(a.uncertainty.edge_fraction, b.uncertainty.edge_fraction);
+  EXPECT_EQ(a.uncertainty.min_jump_sigma, b.uncertainty.min_jump_sigma);
+  EXPECT_EQ(a.uncertainty.extrapolate_edges, b.uncertainty.extrapolate_edges);
+  EXPECT_EQ(a.uncertainty.unknown_neighbour_flags, b.uncertainty.unknown_neighbour_flags);
   EXPECT_EQ(a.smoothing_enabled, b.smoothing_enabled);
   EXPECT_EQ(a.smoothing.kind, b.smoothing.kind);
   EXPECT_EQ(a.smoothing.radius_px, b.smoothing.radius_px);
@@ -143,6 +149,12 @@ PipelineOptions Unusual() {
   o.controller.vendor_deadband = 3;
   o.controller.loop_gain = 1.0 / 3;
   o.controller.frame_rate_hz = 12.5;
+  o.uncertainty_enabled = true;
+  o.uncertainty.max_uncertainty_m = 0.04;
+  o.uncertainty.edge_fraction = 0.25;
+  o.uncertainty.min_jump_sigma = 2.5;
+  o.uncertainty.extrapolate_edges = true;
+  o.uncertainty.unknown_neighbour_flags = PixelFlags(Flag::kSaturated).bits();
   o.smoothing_enabled = true;
   o.smoothing.kind = SpatialFilterKind::kBilateral;
   o.smoothing.radius_px = 2;

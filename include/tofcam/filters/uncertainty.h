@@ -9,7 +9,8 @@
 ///
 /// with `jump` the largest distance step to a usable 4-neighbour when that step exceeds
 /// `min_jump_sigma` of the two pixels' combined ΔL (smaller steps are noise or slope, not an
-/// edge). Pixels with a reject flag (saturated, inconsistent between frequencies, ...) or
+/// edge); with `extrapolate_edges` the edge term is instead how far the pixel leaves its own
+/// side's surface. Pixels with a reject flag (saturated, inconsistent between frequencies, ...) or
 /// without ΔL have u = +inf. Optionally (`unknown_neighbour_flags`) so have pixels next to a
 /// clipped one or to one whose two combined frames disagree: such a neighbour sees something else
 /// (far brighter and usually much nearer, or that moved) at a distance nobody knows, so the jump
@@ -31,6 +32,13 @@ struct UncertaintyOptions {
   double edge_fraction = 0.5;
   /// Steps smaller than this many combined σ are not edges, (0, 100].
   double min_jump_sigma = 3.0;
+  /// Edge term from the pixel's own side: for a step to neighbour j, the term is how far the
+  /// pixel lies off the straight line through its two neighbours opposite j (0 within
+  /// min_jump_sigma of that deviation's σ, sqrt(σ² + 4 σ_1² + σ_2²)), instead of edge_fraction
+  /// x the step; edge_fraction x the step where those two are not usable. A pixel that
+  /// continues its own surface up to the edge reads right whatever lies beyond; a mixed pixel
+  /// leaves both lines. Measured: docs/beyond.md.
+  bool extrapolate_edges = false;
   /// A pixel with a 4-neighbour carrying any of these flags gets u = +inf (see the file
   /// comment); 0 = none (the default). Measured (`tofcam experiment beyond`, two frequencies):
   /// kSaturated | kInconsistent lowers the kept pixels' RMSE within L from 237 to 218 mm but
