@@ -1,5 +1,6 @@
 #include "hdf5_util.h"
 
+#include <algorithm>
 #include <cstring>
 #include <system_error>
 
@@ -114,6 +115,57 @@ void CheckType(const std::filesystem::path& file, hid_t dataset, const std::stri
   }
 }
 
+void CheckStoredChunks(const std::filesystem::path& file, hid_t dataset, const std::string& name,
+                       const std::vector<hsize_t>& start, const std::vector<hsize_t>& count) {
+  Handle plist(H5Dget_create_plist(dataset), H5Pclose);
+  if (!plist.valid() || H5Pget_layout(plist.get()) != H5D_CHUNKED) return;
+  if (H5Pget_nfilters(plist.get()) != 0) return;
+  const int rank = static_cast<int>(start.size());
+  std::vector<hsize_t> chunk(static_cast<std::size_t>(std::max(rank, 1)));
+  Handle type(H5Dget_type(dataset), H5Tclose);
+  const std::size_t element = type.valid() ? H5Tget_size(type.get()) : 0;
+  if (count.size() != start.size() || H5Pget_chunk(plist.get(), rank, chunk.data()) != rank ||
+      element == 0) {
+    Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an unreadable chunk layout");
+  }
+  hsize_t chunk_bytes = element;  // OpenDataset bounded it to 256 MiB
+  for (hsize_t c : chunk) {
+    if (c == 0) Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an empty chunk");
+    chunk_bytes *= c;
+  }
+  for (std::size_t k = 0; k < count.size(); ++k) {
+    if (count[k] == 0) return;
+  }
+  // Every chunk the selection touches, as an odometer over the chunk grid; a read touches few.
+  std::vector<hsize_t> first(start.size()), last(start.size()), at(start.size());
+  for (std::size_t k = 0; k < start.size(); ++k) {
+    first[k] = start[k] / chunk[k];
+    last[k] = (start[k] + count[k] - 1) / chunk[k];
+    at[k] = first[k];
+  }
+  std::vector<hsize_t> offset(start.size());
+  while (true) {
+    for (std::size_t k = 0; k < at.size(); ++k) offset[k] = at[k] * chunk[k];
+    unsigned mask = 0;
+    haddr_t address = HADDR_UNDEF;
+    hsize_t stored = 0;
+    if (H5Dget_chunk_info_by_coord(dataset, offset.data(), &mask, &address, &stored) < 0) {
+      Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an unreadable chunk index");
+    }
+    if (address != HADDR_UNDEF && stored != chunk_bytes) {
+      Fail(ErrorCode::kFormat, file,
+           "dataset '" + name + "' stores a chunk of " + std::to_string(stored) + " bytes, " +
+               std::to_string(chunk_bytes) + " expected (corrupted)");
+    }
+    std::size_t k = at.size();
+    while (k-- > 0) {
+      if (++at[k] <= last[k]) break;
+      at[k] = first[k];
+    }
+    if (k == static_cast<std::size_t>(-1)) return;
+  }
+}
+
 template <typename T>
 void ReadSlab(const std::filesystem::path& file, hid_t dataset, const std::string& name,
               hid_t mem_type, const std::vector<hsize_t>& start, const std::vector<hsize_t>& count,
@@ -126,6 +178,7 @@ void ReadSlab(const std::filesystem::path& file, hid_t dataset, const std::strin
                                                  nullptr, count.data(), nullptr) < 0) {
     Fail(ErrorCode::kFormat, file, "cannot select frames of dataset '" + name + "'");
   }
+  CheckStoredChunks(file, dataset, name, start, count);
   Handle mem_space(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr),
                    H5Sclose);
   if (!mem_space.valid() ||

@@ -88,8 +88,15 @@ class Handle {
 void CheckType(const std::filesystem::path& file, hid_t dataset, const std::string& name,
                H5T_class_t cls, std::size_t bytes, bool is_signed = false);
 
+/// Throws kFormat when a stored chunk of an unfiltered chunked dataset that overlaps the
+/// hyperslab [start, start+count) holds fewer or more bytes than a chunk: libhdf5 copies a whole
+/// chunk out of a buffer of the stored size (a heap overflow on a damaged file, found by
+/// fuzz_recording). Filtered chunks are the filter's business; unallocated ones read as fill.
+void CheckStoredChunks(const std::filesystem::path& file, hid_t dataset, const std::string& name,
+                       const std::vector<hsize_t>& start, const std::vector<hsize_t>& count);
+
 /// Reads a hyperslab [start, start+count) of a dataset into `out` (resized), converting to
-/// `mem_type`. kFormat when HDF5 fails (e.g. corrupted chunk).
+/// `mem_type`. kFormat when HDF5 fails (e.g. corrupted chunk) or CheckStoredChunks does.
 template <typename T>
 void ReadSlab(const std::filesystem::path& file, hid_t dataset, const std::string& name,
               hid_t mem_type, const std::vector<hsize_t>& start, const std::vector<hsize_t>& count,

@@ -13,6 +13,7 @@
 
 namespace tofcam {
 
+using io_internal::CheckStoredChunks;
 using io_internal::Fail;
 using io_internal::Handle;
 using io_internal::Hdf5Silencer;
@@ -570,6 +571,7 @@ struct RecordingReader::Impl {
     Handle file_space(H5Dget_space(d.get()), H5Sclose);
     const hsize_t start[3] = {index, 0, 0};
     const hsize_t block[3] = {1, h, w};
+    CheckStoredChunks(path, d.get(), name, {index, 0, 0}, {1, h, w});
     Handle mem_space(H5Screate_simple(3, block, nullptr), H5Sclose);
     if (!file_space.valid() ||
         H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, block, nullptr) < 0 ||

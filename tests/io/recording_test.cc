@@ -425,5 +425,22 @@ TEST(HostileRecordingRegression, CorruptedChunkSizesAreRejectedBeforeReading) {
   }
 }
 
+// A fuzzer-found recording (kept in tests/data/fuzz; CI run of November 25) whose unfiltered
+// chunk of info/timestamp_ns stores 8 bytes where a chunk holds 16: libhdf5 copied 16 bytes out
+// of its 8-byte buffer (a heap overflow under ASan). The reader must refuse it, naming the
+// dataset, before any read.
+TEST(HostileRecordingRegression, ShortStoredChunksAreRejectedBeforeReading) {
+  const std::filesystem::path p =
+      std::filesystem::path(TOFCAM_TEST_DATA_DIR) / "fuzz" / "recording_short_chunk.h5";
+  try {
+    RecordingReader reader(p);
+    for (std::size_t i = 0; i < reader.frame_count(); ++i) (void)reader.Read(i);
+    FAIL() << "a corrupted recording was read without error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kFormat) << e.what();
+    EXPECT_NE(std::string(e.what()).find("stores a chunk of"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace tofcam
