@@ -5,7 +5,7 @@ set -euo pipefail
 packages=(
   build-essential cmake pkg-config
   libeigen3-dev libembree-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
-  libpng-dev libcairo2-dev libhdf5-dev libtinyobjloader-dev libnanoflann-dev
+  libpng-dev libcairo2-dev libhdf5-dev zlib1g-dev libtinyobjloader-dev libnanoflann-dev
   cyclonedds-dev cyclonedds-tools
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev clang-format clang-tidy

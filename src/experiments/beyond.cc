@@ -345,7 +345,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
           "what is kept) raises the F1 to "
        << F(metric(7, "f1"), 3) << " (bad among kept " << Pct(metric(5, "kept_bad_fraction"))
        << " -> " << Pct(metric(7, "kept_bad_fraction"))
-       << "), and edge terms from the pixel's own side to " << F(metric(8, "f1"), 3)
+       << "); with edge terms from the pixel's own side as well it is " << F(metric(8, "f1"), 3)
        << ". The per-scene table (beyond_scenes.csv) shows where the rest is lost.\n\n"
        << "Per-pixel ceiling F1: the best F1 a rejection rule could reach on the same frames if it "
           "were told each pixel's true σ (the simulator's, combined for two-frame methods) and "

@@ -1,5 +1,7 @@
 #include "hdf5_util.h"
 
+#include <zlib.h>
+
 #include <algorithm>
 #include <cstring>
 #include <system_error>
@@ -43,7 +45,15 @@ bool Exists(hid_t loc, const std::string& name) {
 
 Handle OpenDataset(const std::filesystem::path& file, hid_t loc, const std::string& name) {
   if (!Exists(loc, name)) Fail(ErrorCode::kFormat, file, "missing dataset '" + name + "'");
-  Handle d(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), H5Dclose);
+  // No chunk cache: libhdf5 then reads an unfiltered chunk straight into the caller's buffer at
+  // the layout's size instead of copying it out of a buffer sized by the (possibly damaged)
+  // chunk index. Filtered chunks never reach libhdf5's filters (ReadSelection).
+  Handle dapl(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose);
+  if (!dapl.valid() || H5Pset_chunk_cache(dapl.get(), H5D_CHUNK_CACHE_NSLOTS_DEFAULT, 0,
+                                          H5D_CHUNK_CACHE_W0_DEFAULT) < 0) {
+    Fail(ErrorCode::kInternal, file, "cannot create HDF5 dataset access property list");
+  }
+  Handle d(H5Dopen2(loc, name.c_str(), dapl.get()), H5Dclose);
   if (!d.valid()) Fail(ErrorCode::kFormat, file, "'" + name + "' is not a readable dataset");
   // libhdf5 sizes its read and decompression buffers from the dataset's stored chunk sizes and
   // chunk shape. In a damaged file those can claim gigabytes (found by fuzz_recording), so both
@@ -62,7 +72,32 @@ Handle OpenDataset(const std::filesystem::path& file, hid_t loc, const std::stri
              std::to_string(file_bytes) + " (corrupted)");
   }
   Handle plist(H5Dget_create_plist(d.get()), H5Pclose);
-  if (plist.valid() && H5Pget_layout(plist.get()) == H5D_CHUNKED) {
+  const H5D_layout_t layout = plist.valid() ? H5Pget_layout(plist.get()) : H5D_LAYOUT_ERROR;
+  if (layout == H5D_LAYOUT_ERROR) {
+    Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an unreadable layout");
+  }
+  // A virtual dataset or external storage would make libhdf5 open files the damaged file names.
+  if (layout == H5D_VIRTUAL || H5Pget_external_count(plist.get()) != 0) {
+    Fail(ErrorCode::kFormat, file,
+         "dataset '" + name + "' is virtual or stored in other files (not read by tofcam)");
+  }
+  if (layout == H5D_CHUNKED) {
+    const int filters = H5Pget_nfilters(plist.get());
+    if (filters < 0)
+      Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has unreadable filters");
+    for (int k = 0; k < filters; ++k) {
+      unsigned flags = 0;
+      std::size_t n = 0;
+      const H5Z_filter_t id = H5Pget_filter2(plist.get(), static_cast<unsigned>(k), &flags, &n,
+                                             nullptr, 0, nullptr, nullptr);
+      if (id != H5Z_FILTER_DEFLATE && id != H5Z_FILTER_SHUFFLE) {
+        Fail(ErrorCode::kFormat, file,
+             "dataset '" + name + "' uses HDF5 filter " + std::to_string(id) +
+                 " (tofcam reads deflate and shuffle)");
+      }
+    }
+  }
+  if (layout == H5D_CHUNKED) {
     hsize_t chunk[H5S_MAX_RANK] = {};
     const int rank = H5Pget_chunk(plist.get(), H5S_MAX_RANK, chunk);
     Handle type(H5Dget_type(d.get()), H5Tclose);
@@ -77,6 +112,14 @@ Handle OpenDataset(const std::filesystem::path& file, hid_t loc, const std::stri
              "dataset '" + name + "' has a chunk larger than 256 MiB (corrupted?)");
       }
       bytes *= chunk[i];
+    }
+    // Unfiltered chunks are stored whole (edge chunks too). H5Dget_num_chunks would say how many,
+    // but it reports 0 for some chunk indexes of libhdf5 1.10.8.
+    if (H5Pget_nfilters(plist.get()) == 0 && stored % bytes != 0) {
+      Fail(ErrorCode::kFormat, file,
+           "dataset '" + name + "' stores " + std::to_string(stored) +
+               " bytes, not a whole number of " + std::to_string(bytes) +
+               "-byte chunks (corrupted)");
     }
   }
   return d;
@@ -115,54 +158,216 @@ void CheckType(const std::filesystem::path& file, hid_t dataset, const std::stri
   }
 }
 
-void CheckStoredChunks(const std::filesystem::path& file, hid_t dataset, const std::string& name,
-                       const std::vector<hsize_t>& start, const std::vector<hsize_t>& count) {
-  Handle plist(H5Dget_create_plist(dataset), H5Pclose);
-  if (!plist.valid() || H5Pget_layout(plist.get()) != H5D_CHUNKED) return;
-  if (H5Pget_nfilters(plist.get()) != 0) return;
-  const int rank = static_cast<int>(start.size());
-  std::vector<hsize_t> chunk(static_cast<std::size_t>(std::max(rank, 1)));
-  Handle type(H5Dget_type(dataset), H5Tclose);
-  const std::size_t element = type.valid() ? H5Tget_size(type.get()) : 0;
-  if (count.size() != start.size() || H5Pget_chunk(plist.get(), rank, chunk.data()) != rank ||
-      element == 0) {
-    Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an unreadable chunk layout");
+namespace {
+
+// Inflates `in` into exactly `expected` bytes; false for anything else (a damaged stream, or one
+// that inflates to more or fewer bytes than a chunk).
+bool Inflate(const std::vector<unsigned char>& in, std::size_t expected,
+             std::vector<unsigned char>& out) {
+  out.resize(expected);
+  z_stream z{};
+  if (inflateInit(&z) != Z_OK) return false;
+  z.next_in = const_cast<unsigned char*>(in.data());
+  z.avail_in = static_cast<uInt>(in.size());
+  z.next_out = out.data();
+  z.avail_out = static_cast<uInt>(expected);
+  const int rc = inflate(&z, Z_FINISH);
+  const bool ok = rc == Z_STREAM_END && z.total_out == expected;
+  inflateEnd(&z);
+  return ok;
+}
+
+// Element sizes known at compile time let GCC vectorise the interleaving stores.
+template <std::size_t kSize>
+void UnshuffleFixed(const unsigned char* __restrict in, std::size_t n,
+                    unsigned char* __restrict out) {
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t k = 0; k < kSize; ++k) out[i * kSize + k] = in[k * n + i];
   }
-  hsize_t chunk_bytes = element;  // OpenDataset bounded it to 256 MiB
-  for (hsize_t c : chunk) {
-    if (c == 0) Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an empty chunk");
-    chunk_bytes *= c;
+}
+
+// HDF5's shuffle stores byte k of every element together; this puts them back.
+void Unshuffle(const std::vector<unsigned char>& in, std::size_t element,
+               std::vector<unsigned char>& out) {
+  out.resize(in.size());
+  const std::size_t n = in.size() / element;
+  if (element == 2) {
+    UnshuffleFixed<2>(in.data(), n, out.data());
+  } else if (element == 4) {
+    UnshuffleFixed<4>(in.data(), n, out.data());
+  } else if (element == 8) {
+    UnshuffleFixed<8>(in.data(), n, out.data());
+  } else {
+    for (std::size_t k = 0; k < element; ++k) {
+      for (std::size_t i = 0; i < n; ++i) out[i * element + k] = in[k * n + i];
+    }
   }
-  for (std::size_t k = 0; k < count.size(); ++k) {
+  // Bytes past the last whole element are stored as they are (HDF5's rule).
+  std::copy(in.begin() + static_cast<std::ptrdiff_t>(n * element), in.end(),
+            out.begin() + static_cast<std::ptrdiff_t>(n * element));
+}
+
+std::string Coordinates(const std::vector<hsize_t>& v) {
+  std::string s = "(";
+  for (std::size_t k = 0; k < v.size(); ++k) s += (k ? ", " : "") + std::to_string(v[k]);
+  return s + ")";
+}
+
+void ReadFilteredChunks(const std::filesystem::path& file, hid_t dataset, hid_t plist,
+                        const std::string& name, hid_t mem_type, const std::vector<hsize_t>& start,
+                        const std::vector<hsize_t>& count, unsigned char* out) {
+  const auto bad = [&](const std::string& what) {
+    Fail(ErrorCode::kFormat, file, "dataset '" + name + "' " + what);
+  };
+  const std::size_t rank = start.size();
+  std::vector<hsize_t> chunk(rank);
+  Handle file_type(H5Dget_type(dataset), H5Tclose);
+  const std::size_t file_size = file_type.valid() ? H5Tget_size(file_type.get()) : 0;
+  const std::size_t mem_size = H5Tget_size(mem_type);
+  if (rank == 0 ||
+      H5Pget_chunk(plist, static_cast<int>(rank), chunk.data()) != static_cast<int>(rank) ||
+      file_size == 0 || mem_size == 0) {
+    bad("has an unreadable chunk layout or type");
+  }
+  const std::vector<hsize_t> dims = DatasetDims(file, dataset, name, static_cast<int>(rank));
+  if (dims.size() != rank) bad("has rank " + std::to_string(dims.size()));
+  for (std::size_t k = 0; k < rank; ++k) {
     if (count[k] == 0) return;
+    if (start[k] > dims[k] || count[k] > dims[k] - start[k]) bad("is smaller than the read");
   }
-  // Every chunk the selection touches, as an odometer over the chunk grid; a read touches few.
-  std::vector<hsize_t> first(start.size()), last(start.size()), at(start.size());
-  for (std::size_t k = 0; k < start.size(); ++k) {
+  hsize_t chunk_elements = 1;
+  for (hsize_t c : chunk) chunk_elements *= c;  // OpenDataset bounded it to 256 MiB
+  const std::size_t chunk_bytes = static_cast<std::size_t>(chunk_elements) * file_size;
+  const int filters = H5Pget_nfilters(plist);
+  std::vector<H5Z_filter_t> ids;
+  std::vector<std::size_t> shuffle_size;
+  for (int k = 0; k < filters; ++k) {
+    unsigned flags = 0, cd[4] = {};
+    std::size_t n = 4;
+    ids.push_back(
+        H5Pget_filter2(plist, static_cast<unsigned>(k), &flags, &n, cd, 0, nullptr, nullptr));
+    shuffle_size.push_back(n > 0 && cd[0] > 0 ? cd[0] : file_size);
+  }
+  // Deflate never stores more than compressBound of its input; a chunk with its filters skipped
+  // is stored whole. Larger claims are damage, refused before any buffer is sized by them.
+  const hsize_t max_stored = compressBound(static_cast<uLong>(chunk_bytes));
+  const bool convert = H5Tequal(file_type.get(), mem_type) <= 0;
+  std::vector<unsigned char> fill;  // the fill value in mem_type, fetched at the first need
+
+  thread_local std::vector<unsigned char> a, b;
+  std::vector<hsize_t> first(rank), last(rank), at(rank), offset(rank), lo(rank), hi(rank);
+  for (std::size_t k = 0; k < rank; ++k) {
     first[k] = start[k] / chunk[k];
     last[k] = (start[k] + count[k] - 1) / chunk[k];
     at[k] = first[k];
   }
-  std::vector<hsize_t> offset(start.size());
   while (true) {
-    for (std::size_t k = 0; k < at.size(); ++k) offset[k] = at[k] * chunk[k];
-    unsigned mask = 0;
-    haddr_t address = HADDR_UNDEF;
+    for (std::size_t k = 0; k < rank; ++k) {
+      offset[k] = at[k] * chunk[k];
+      lo[k] = std::max(start[k], offset[k]);
+      hi[k] = std::min(start[k] + count[k], offset[k] + chunk[k]);
+    }
     hsize_t stored = 0;
-    if (H5Dget_chunk_info_by_coord(dataset, offset.data(), &mask, &address, &stored) < 0) {
-      Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an unreadable chunk index");
+    if (H5Dget_chunk_storage_size(dataset, offset.data(), &stored) < 0) stored = 0;
+    const unsigned char* values = nullptr;  // the chunk in mem_type, or null: fill value
+    if (stored > 0) {
+      if (stored > max_stored) {
+        bad("claims a chunk of " + std::to_string(stored) + " stored bytes at " +
+            Coordinates(offset) + " (corrupted)");
+      }
+      a.resize(static_cast<std::size_t>(stored));
+      std::uint32_t mask = 0;
+      if (H5Dread_chunk(dataset, H5P_DEFAULT, offset.data(), &mask, a.data()) < 0) {
+        bad("has an unreadable chunk at " + Coordinates(offset));
+      }
+      for (int k = filters - 1; k >= 0; --k) {
+        if (mask >> k & 1u) continue;  // this filter was not applied to this chunk
+        if (ids[static_cast<std::size_t>(k)] == H5Z_FILTER_DEFLATE) {
+          if (!Inflate(a, chunk_bytes, b)) {
+            bad("has a chunk at " + Coordinates(offset) + " that does not inflate to " +
+                std::to_string(chunk_bytes) + " bytes (corrupted)");
+          }
+        } else {
+          if (a.size() != chunk_bytes) break;  // reported below
+          Unshuffle(a, shuffle_size[static_cast<std::size_t>(k)], b);
+        }
+        std::swap(a, b);
+      }
+      if (a.size() != chunk_bytes) {
+        bad("has a chunk at " + Coordinates(offset) + " of " + std::to_string(a.size()) +
+            " bytes, " + std::to_string(chunk_bytes) + " expected (corrupted)");
+      }
+      if (convert) {
+        a.resize(static_cast<std::size_t>(chunk_elements) * std::max(file_size, mem_size));
+        if (H5Tconvert(file_type.get(), mem_type, static_cast<std::size_t>(chunk_elements),
+                       a.data(), nullptr, H5P_DEFAULT) < 0) {
+          bad("has values that do not convert to the requested type");
+        }
+      }
+      values = a.data();
     }
-    if (address != HADDR_UNDEF && stored != chunk_bytes) {
-      Fail(ErrorCode::kFormat, file,
-           "dataset '" + name + "' stores a chunk of " + std::to_string(stored) + " bytes, " +
-               std::to_string(chunk_bytes) + " expected (corrupted)");
+    if (!values && fill.empty()) {
+      // Unallocated chunks read as the fill value (0 unless the file defines one).
+      fill.assign(mem_size, 0);
+      if (H5Pget_fill_value(plist, mem_type, fill.data()) < 0)
+        std::fill(fill.begin(), fill.end(), 0);
     }
-    std::size_t k = at.size();
+    // Copy the chunk's part of the selection, one run along the last dimension at a time.
+    std::vector<hsize_t> i = lo;
+    const std::size_t run = static_cast<std::size_t>(hi[rank - 1] - lo[rank - 1]);
+    while (true) {
+      std::size_t src = 0, dst = 0;
+      for (std::size_t k = 0; k < rank; ++k) {
+        src = src * chunk[k] + (i[k] - offset[k]);
+        dst = dst * count[k] + (i[k] - start[k]);
+      }
+      unsigned char* to = out + dst * mem_size;
+      if (values) {
+        std::memcpy(to, values + src * mem_size, run * mem_size);
+      } else {
+        for (std::size_t e = 0; e < run; ++e) std::memcpy(to + e * mem_size, fill.data(), mem_size);
+      }
+      std::size_t k = rank - 1;
+      while (k-- > 0) {
+        if (++i[k] < hi[k]) break;
+        i[k] = lo[k];
+      }
+      if (k == static_cast<std::size_t>(-1)) break;
+    }
+    std::size_t k = rank;
     while (k-- > 0) {
       if (++at[k] <= last[k]) break;
       at[k] = first[k];
     }
     if (k == static_cast<std::size_t>(-1)) return;
+  }
+}
+
+}  // namespace
+
+void ReadSelection(const std::filesystem::path& file, hid_t dataset, const std::string& name,
+                   hid_t mem_type, const std::vector<hsize_t>& start,
+                   const std::vector<hsize_t>& count, void* out) {
+  if (start.size() != count.size()) {
+    Fail(ErrorCode::kInternal, file, "read of dataset '" + name + "' with a malformed selection");
+  }
+  Handle plist(H5Dget_create_plist(dataset), H5Pclose);
+  if (!plist.valid()) Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has no layout");
+  if (H5Pget_layout(plist.get()) == H5D_CHUNKED && H5Pget_nfilters(plist.get()) > 0) {
+    ReadFilteredChunks(file, dataset, plist.get(), name, mem_type, start, count,
+                       static_cast<unsigned char*>(out));
+    return;
+  }
+  Handle file_space(H5Dget_space(dataset), H5Sclose);
+  if (!file_space.valid() || H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start.data(),
+                                                 nullptr, count.data(), nullptr) < 0) {
+    Fail(ErrorCode::kFormat, file, "cannot select frames of dataset '" + name + "'");
+  }
+  Handle mem_space(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr),
+                   H5Sclose);
+  if (!mem_space.valid() ||
+      H5Dread(dataset, mem_type, mem_space.get(), file_space.get(), H5P_DEFAULT, out) < 0) {
+    Fail(ErrorCode::kFormat, file, "cannot read dataset '" + name + "' (corrupted data?)");
   }
 }
 
@@ -172,19 +377,11 @@ void ReadSlab(const std::filesystem::path& file, hid_t dataset, const std::strin
               std::vector<T>& out) {
   std::size_t n = 1;
   for (hsize_t c : count) n *= static_cast<std::size_t>(c);
+  if (H5Tget_size(mem_type) != sizeof(T)) {
+    Fail(ErrorCode::kInternal, file, "read of dataset '" + name + "' into a wrong-sized type");
+  }
   out.resize(n);
-  Handle file_space(H5Dget_space(dataset), H5Sclose);
-  if (!file_space.valid() || H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start.data(),
-                                                 nullptr, count.data(), nullptr) < 0) {
-    Fail(ErrorCode::kFormat, file, "cannot select frames of dataset '" + name + "'");
-  }
-  CheckStoredChunks(file, dataset, name, start, count);
-  Handle mem_space(H5Screate_simple(static_cast<int>(count.size()), count.data(), nullptr),
-                   H5Sclose);
-  if (!mem_space.valid() ||
-      H5Dread(dataset, mem_type, mem_space.get(), file_space.get(), H5P_DEFAULT, out.data()) < 0) {
-    Fail(ErrorCode::kFormat, file, "cannot read dataset '" + name + "' (corrupted data?)");
-  }
+  ReadSelection(file, dataset, name, mem_type, start, count, out.data());
 }
 
 template void ReadSlab<std::uint8_t>(const std::filesystem::path&, hid_t, const std::string&, hid_t,

@@ -75,7 +75,10 @@ class Handle {
 /// True when `name` (a path relative to `loc`, may contain '/') exists as a link.
 [[nodiscard]] bool Exists(hid_t loc, const std::string& name);
 
-/// Opens a dataset; kFormat naming it when it is missing.
+/// Opens a dataset; kFormat naming it when it is missing, virtual or stored outside the file,
+/// filtered by anything but deflate and shuffle, or when its stored bytes cannot be what its
+/// layout says (an unfiltered chunked dataset's storage must be whole chunks). Opened with the
+/// chunk cache off, so that libhdf5 reads unfiltered chunks straight into the caller's buffer.
 [[nodiscard]] Handle OpenDataset(const std::filesystem::path& file, hid_t loc,
                                  const std::string& name);
 
@@ -88,15 +91,17 @@ class Handle {
 void CheckType(const std::filesystem::path& file, hid_t dataset, const std::string& name,
                H5T_class_t cls, std::size_t bytes, bool is_signed = false);
 
-/// Throws kFormat when a stored chunk of an unfiltered chunked dataset that overlaps the
-/// hyperslab [start, start+count) holds fewer or more bytes than a chunk: libhdf5 copies a whole
-/// chunk out of a buffer of the stored size (a heap overflow on a damaged file, found by
-/// fuzz_recording). Filtered chunks are the filter's business; unallocated ones read as fill.
-void CheckStoredChunks(const std::filesystem::path& file, hid_t dataset, const std::string& name,
-                       const std::vector<hsize_t>& start, const std::vector<hsize_t>& count);
+/// Reads the hyperslab [start, start+count) of a dataset opened by OpenDataset into `out`
+/// (prod(count) values of `mem_type`), converting from the stored type. Filtered chunked
+/// datasets are decoded here, not by libhdf5: libhdf5 1.10 copies a chunk out of whatever its
+/// filters returned without checking the size (a heap overflow on a damaged file, found by
+/// fuzz_recording), so every chunk is read raw (H5Dread_chunk) and must inflate / unshuffle to
+/// exactly one chunk. kFormat naming the dataset on any failure.
+void ReadSelection(const std::filesystem::path& file, hid_t dataset, const std::string& name,
+                   hid_t mem_type, const std::vector<hsize_t>& start,
+                   const std::vector<hsize_t>& count, void* out);
 
-/// Reads a hyperslab [start, start+count) of a dataset into `out` (resized), converting to
-/// `mem_type`. kFormat when HDF5 fails (e.g. corrupted chunk) or CheckStoredChunks does.
+/// ReadSelection into `out` (resized).
 template <typename T>
 void ReadSlab(const std::filesystem::path& file, hid_t dataset, const std::string& name,
               hid_t mem_type, const std::vector<hsize_t>& start, const std::vector<hsize_t>& count,

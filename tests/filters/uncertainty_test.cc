@@ -71,6 +71,26 @@ TEST(Uncertainty, ExtrapolatedEdgesChargeOnlyWhatLeavesTheOwnSurface) {
   EXPECT_NEAR(ComputeUncertainty(m, on)[2], std::sqrt(0.0001 + 0.01), 1e-6);
 }
 
+TEST(Uncertainty, ExtrapolatedEdgesWorkDownColumnsAndFallBackNextToRejectedPixels) {
+  // The mixed-pixel row of the test above as a column (1 x 7): the same terms.
+  UncertaintyOptions on;
+  on.extrapolate_edges = true;
+  MetricFrame m = Row({1.0f, 1.0f, 1.0f, 1.5f, 2.0f, 2.0f, 2.0f}, 0.01f);
+  MetricFrame column;
+  column.radial_distance_m = Image<float>(1, 7);
+  column.flags = Image<PixelFlags>(1, 7);
+  column.delta_l_m = Image<float>(1, 7, 0.01f);
+  for (int i = 0; i < 7; ++i) column.radial_distance_m[i] = m.radial_distance_m[i];
+  const Image<float> u = ComputeUncertainty(column, on);
+  EXPECT_NEAR(u[2], 0.01, 1e-6);
+  EXPECT_NEAR(u[3], std::sqrt(0.0001 + 0.25), 1e-6);
+  EXPECT_NEAR(u[4], 0.01, 1e-6);
+  // Pixel 1 rejected: pixel 2's own line (1, 2) is not measurable, so its step to pixel 3 (0.5 m)
+  // is charged by the step rule, half of it.
+  column.flags[1] = PixelFlags(Flag::kLowAmplitude);
+  EXPECT_NEAR(ComputeUncertainty(column, on)[2], std::sqrt(0.0001 + 0.0625), 1e-6);
+}
+
 TEST(Uncertainty, RejectedPixelsAreInfiniteAndNotNeighbours) {
   MetricFrame m = Row({1.0f, 5.0f, 1.0f, 1.0f}, 0.01f);
   m.flags[1] = PixelFlags(Flag::kLowAmplitude);

@@ -37,7 +37,9 @@ struct UncertaintyOptions {
   /// min_jump_sigma of that deviation's σ, sqrt(σ² + 4 σ_1² + σ_2²)), instead of edge_fraction
   /// x the step; edge_fraction x the step where those two are not usable. A pixel that
   /// continues its own surface up to the edge reads right whatever lies beyond; a mixed pixel
-  /// leaves both lines. Measured: docs/beyond.md.
+  /// leaves both lines. edge_fraction then applies only to the fallback. An edge blurred
+  /// linearly over three or more pixels looks like a slope and gets no edge term. Measured:
+  /// docs/beyond.md.
   bool extrapolate_edges = false;
   /// A pixel with a 4-neighbour carrying any of these flags gets u = +inf (see the file
   /// comment); 0 = none (the default). Measured (`tofcam experiment beyond`, two frequencies):
