@@ -81,6 +81,25 @@ Handle OpenDataset(const std::filesystem::path& file, hid_t loc, const std::stri
     Fail(ErrorCode::kFormat, file,
          "dataset '" + name + "' is virtual or stored in other files (not read by tofcam)");
   }
+  if (layout == H5D_COMPACT || layout == H5D_CONTIGUOUS) {
+    // libhdf5 1.10 copies a compact dataset out of the bytes its header stores without checking
+    // them against the dataspace (a heap over-read on a damaged file, found in review); a
+    // contiguous one is read from the file, bounded by its end, but must still be whole.
+    Handle type(H5Dget_type(d.get()), H5Tclose);
+    Handle space(H5Dget_space(d.get()), H5Sclose);
+    const std::size_t element = type.valid() ? H5Tget_size(type.get()) : 0;
+    const hssize_t points = space.valid() ? H5Sget_simple_extent_npoints(space.get()) : -1;
+    if (element == 0 || points < 0) {
+      Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has an unreadable type or extent");
+    }
+    const hsize_t needed = static_cast<hsize_t>(points) * element;
+    if (stored != needed && (layout == H5D_COMPACT || stored != 0)) {
+      Fail(ErrorCode::kFormat, file,
+           "dataset '" + name + "' stores " + std::to_string(stored) + " bytes for " +
+               std::to_string(points) + " values of " + std::to_string(element) +
+               " bytes (corrupted)");
+    }
+  }
   if (layout == H5D_CHUNKED) {
     const int filters = H5Pget_nfilters(plist.get());
     if (filters < 0)
@@ -252,9 +271,23 @@ void ReadFilteredChunks(const std::filesystem::path& file, hid_t dataset, hid_t 
   // is stored whole. Larger claims are damage, refused before any buffer is sized by them.
   const hsize_t max_stored = compressBound(static_cast<uLong>(chunk_bytes));
   const bool convert = H5Tequal(file_type.get(), mem_type) <= 0;
+  unsigned chunk_options = 0;
+  const bool raw_partial_chunks = H5Pget_chunk_opts(plist, &chunk_options) >= 0 &&
+                                  (chunk_options & H5D_CHUNK_DONT_FILTER_PARTIAL_CHUNKS) != 0;
+  // Conversion runs through a buffer of one run (not the whole chunk: a tiny file with a huge
+  // chunk of bytes read as doubles would otherwise ask for 8x the chunk).
+  std::vector<unsigned char> converted;
   std::vector<unsigned char> fill;  // the fill value in mem_type, fetched at the first need
 
   thread_local std::vector<unsigned char> a, b;
+  // Kept between calls (no allocation per frame), but not a damaged file's huge chunk.
+  struct Shrink {
+    ~Shrink() {
+      constexpr std::size_t kKeep = std::size_t{64} << 20;
+      if (a.capacity() > kKeep) std::vector<unsigned char>().swap(a);
+      if (b.capacity() > kKeep) std::vector<unsigned char>().swap(b);
+    }
+  } shrink;
   std::vector<hsize_t> first(rank), last(rank), at(rank), offset(rank), lo(rank), hi(rank);
   for (std::size_t k = 0; k < rank; ++k) {
     first[k] = start[k] / chunk[k];
@@ -268,7 +301,17 @@ void ReadFilteredChunks(const std::filesystem::path& file, hid_t dataset, hid_t 
       hi[k] = std::min(start[k] + count[k], offset[k] + chunk[k]);
     }
     hsize_t stored = 0;
-    if (H5Dget_chunk_storage_size(dataset, offset.data(), &stored) < 0) stored = 0;
+    if (H5Dget_chunk_storage_size(dataset, offset.data(), &stored) < 0) {
+      // libhdf5 1.10 fails this for chunks never written as well as for a damaged index; the
+      // slower lookup tells them apart (an undefined address: not written, the fill value).
+      unsigned mask = 0;
+      haddr_t address = HADDR_UNDEF;
+      if (H5Dget_chunk_info_by_coord(dataset, offset.data(), &mask, &address, &stored) < 0 ||
+          address != HADDR_UNDEF) {
+        bad("has an unreadable chunk index at " + Coordinates(offset) + " (corrupted)");
+      }
+      stored = 0;
+    }
     const unsigned char* values = nullptr;  // the chunk in mem_type, or null: fill value
     if (stored > 0) {
       if (stored > max_stored) {
@@ -280,6 +323,11 @@ void ReadFilteredChunks(const std::filesystem::path& file, hid_t dataset, hid_t 
       if (H5Dread_chunk(dataset, H5P_DEFAULT, offset.data(), &mask, a.data()) < 0) {
         bad("has an unreadable chunk at " + Coordinates(offset));
       }
+      // With H5D_CHUNK_DONT_FILTER_PARTIAL_CHUNKS libhdf5 stores chunks that reach past the
+      // extent raw, with mask 0.
+      bool partial = false;
+      for (std::size_t k = 0; k < rank; ++k) partial |= offset[k] + chunk[k] > dims[k];
+      if (partial && raw_partial_chunks) mask = ~0u;
       for (int k = filters - 1; k >= 0; --k) {
         if (mask >> k & 1u) continue;  // this filter was not applied to this chunk
         if (ids[static_cast<std::size_t>(k)] == H5Z_FILTER_DEFLATE) {
@@ -296,13 +344,6 @@ void ReadFilteredChunks(const std::filesystem::path& file, hid_t dataset, hid_t 
       if (a.size() != chunk_bytes) {
         bad("has a chunk at " + Coordinates(offset) + " of " + std::to_string(a.size()) +
             " bytes, " + std::to_string(chunk_bytes) + " expected (corrupted)");
-      }
-      if (convert) {
-        a.resize(static_cast<std::size_t>(chunk_elements) * std::max(file_size, mem_size));
-        if (H5Tconvert(file_type.get(), mem_type, static_cast<std::size_t>(chunk_elements),
-                       a.data(), nullptr, H5P_DEFAULT) < 0) {
-          bad("has values that do not convert to the requested type");
-        }
       }
       values = a.data();
     }
@@ -322,7 +363,15 @@ void ReadFilteredChunks(const std::filesystem::path& file, hid_t dataset, hid_t 
         dst = dst * count[k] + (i[k] - start[k]);
       }
       unsigned char* to = out + dst * mem_size;
-      if (values) {
+      if (values && convert) {
+        converted.resize(run * std::max(file_size, mem_size));
+        std::memcpy(converted.data(), values + src * file_size, run * file_size);
+        if (H5Tconvert(file_type.get(), mem_type, run, converted.data(), nullptr, H5P_DEFAULT) <
+            0) {
+          bad("has values that do not convert to the requested type");
+        }
+        std::memcpy(to, converted.data(), run * mem_size);
+      } else if (values) {
         std::memcpy(to, values + src * mem_size, run * mem_size);
       } else {
         for (std::size_t e = 0; e < run; ++e) std::memcpy(to + e * mem_size, fill.data(), mem_size);
@@ -353,6 +402,13 @@ void ReadSelection(const std::filesystem::path& file, hid_t dataset, const std::
   }
   Handle plist(H5Dget_create_plist(dataset), H5Pclose);
   if (!plist.valid()) Fail(ErrorCode::kFormat, file, "dataset '" + name + "' has no layout");
+  // Numbers only: conversions of compound, string or variable-length types would need a
+  // background buffer and read memory the file points to.
+  Handle type(H5Dget_type(dataset), H5Tclose);
+  const H5T_class_t cls = type.valid() ? H5Tget_class(type.get()) : H5T_NO_CLASS;
+  if (cls != H5T_INTEGER && cls != H5T_FLOAT) {
+    Fail(ErrorCode::kFormat, file, "dataset '" + name + "' does not hold numbers");
+  }
   if (H5Pget_layout(plist.get()) == H5D_CHUNKED && H5Pget_nfilters(plist.get()) > 0) {
     ReadFilteredChunks(file, dataset, plist.get(), name, mem_type, start, count,
                        static_cast<unsigned char*>(out));
