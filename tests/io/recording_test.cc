@@ -463,38 +463,33 @@ TEST_F(RecordingTest, ChunksThatDecodeShortAreRefused) {
 namespace tofcam {
 namespace {
 
-// A fuzzer-found recording (kept in tests/data/fuzz) whose damaged chunk index makes libhdf5 ask
-// for a 4 GB read buffer. The reader must refuse it with a format error before reading.
-TEST(HostileRecordingRegression, CorruptedChunkSizesAreRejectedBeforeReading) {
-  const std::filesystem::path p =
-      std::filesystem::path(TOFCAM_TEST_DATA_DIR) / "fuzz" / "recording_huge_chunk.h5";
+// Opening and reading every frame of `name` (in tests/data/fuzz) must fail with kFormat, and
+// the message must contain `expected`.
+void ExpectRefused(const std::string& name, const std::string& expected) {
+  const std::filesystem::path p = std::filesystem::path(TOFCAM_TEST_DATA_DIR) / "fuzz" / name;
   try {
     RecordingReader reader(p);
     for (std::size_t i = 0; i < reader.frame_count(); ++i) (void)reader.Read(i);
-    FAIL() << "a corrupted recording was read without error";
+    ADD_FAILURE() << name << ": a corrupted recording was read without error";
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::kFormat) << e.what();
-    EXPECT_NE(std::string(e.what()).find("recording_huge_chunk.h5"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
   }
 }
 
-// A fuzzer-found recording (kept in tests/data/fuzz; CI run of November 25) whose unfiltered
-// dataset info/timestamp_ns stores 8 bytes where its one chunk holds 2048: libhdf5 copied the
-// read's 16 bytes out of an 8-byte buffer (a heap overflow under ASan). The reader must refuse
-// it, naming the dataset, before any read.
+// A fuzzer-found recording whose damaged chunk index makes libhdf5 ask for a 4 GB read buffer.
+// The reader must refuse it with a format error before reading.
+TEST(HostileRecordingRegression, CorruptedChunkSizesAreRejectedBeforeReading) {
+  ExpectRefused("recording_huge_chunk.h5", "recording_huge_chunk.h5");
+}
+
+// A fuzzer-found recording (CI run of November 25) whose unfiltered dataset info/timestamp_ns
+// stores 8 bytes where its one chunk holds 2048: libhdf5 copied the read's 16 bytes out of an
+// 8-byte buffer (a heap overflow under ASan). The reader must refuse it, naming the dataset,
+// before any read.
 TEST(HostileRecordingRegression, ShortStoredChunksAreRejectedBeforeReading) {
-  const std::filesystem::path p =
-      std::filesystem::path(TOFCAM_TEST_DATA_DIR) / "fuzz" / "recording_short_chunk.h5";
-  try {
-    RecordingReader reader(p);
-    for (std::size_t i = 0; i < reader.frame_count(); ++i) (void)reader.Read(i);
-    FAIL() << "a corrupted recording was read without error";
-  } catch (const Error& e) {
-    EXPECT_EQ(e.code(), ErrorCode::kFormat) << e.what();
-    EXPECT_NE(std::string(e.what()).find("'info/timestamp_ns' stores 8 bytes, not a whole number"),
-              std::string::npos)
-        << e.what();
-  }
+  ExpectRefused("recording_short_chunk.h5",
+                "'info/timestamp_ns' stores 8 bytes, not a whole number");
 }
 
 }  // namespace
