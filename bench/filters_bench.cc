@@ -89,6 +89,22 @@ BENCHMARK(BM_AccuracyThresholdFilterFresh)->Apply(Resolutions);
 void BM_ApplyAllFilters(benchmark::State& s) { Run(s, All()); }
 BENCHMARK(BM_ApplyAllFilters)->Apply(Resolutions);
 
+// The same set as a FilterSet built once for the rays (what Pipeline and a camera loop use):
+// without the per-call check of the ray table behind the free function's caches.
+void BM_FilterSetAll(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  const tofcam::FilterSet set(All(), in.rays);
+  Image<PixelFlags> out;
+  std::size_t i = 0;
+  for (auto _ : state) {
+    set.Process(in.ready[i++ % in.ready.size()], out);
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  tofcam::bench::SetPixels(state);
+}
+BENCHMARK(BM_FilterSetAll)->Apply(Resolutions);
+
 // Everything but the Weingarten cells (the costliest, a baseline rather than a filter to run).
 void BM_ApplyAllButCells(benchmark::State& s) {
   FilterSetOptions o = All();

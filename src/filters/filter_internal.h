@@ -2,6 +2,9 @@
 // Shared by the filter implementations: input checks and the "into" forms that ApplyFilters
 // chains without copying the frame (prior = what counts as already rejected, out = ORed into).
 
+#include <optional>
+#include <vector>
+
 #include "hot_loop.h"
 #include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/frame.h"
@@ -33,18 +36,52 @@ void AmplitudeInto(const MetricFrame& frame, const AmplitudeThresholdOptions& o,
 void SaturationInto(const MetricFrame& frame, const SaturationOptions& o, Image<PixelFlags>& out);
 void RangeInto(const MetricFrame& frame, const RangeOptions& o, Image<PixelFlags>& out);
 
+// The jump-edge test's constant λ (jump_edge_filter.cc) of every pair of neighbouring rays at one
+// angle: tables padded to (width + 2) x (height + 2), λ(p, p + offset) at p's padded index, +inf
+// for pairs that leave the image.
+struct JumpLambdas {
+  int width = 0, height = 0;
+  double angle_deg = 0.0;
+  std::vector<float> east, south, south_east, south_west;
+};
+[[nodiscard]] JumpLambdas MakeJumpLambdas(const RayTable& rays, double angle_deg);
+
+// The range of each ray component over a ray table: the cell filter bounds its box with it.
+struct RayBounds {
+  float x_lo = 0, x_hi = 0, y_lo = 0, y_hi = 0, z_lo = 0, z_hi = 0;
+};
+[[nodiscard]] RayBounds MakeRayBounds(const RayTable& rays);
+
+// What the neighbourhood filters compute from the rays alone, made once per camera by FilterSet
+// and Pipeline (the RayTable forms below recompute it, or validate a per-thread copy, per call).
+struct PreparedRays {
+  std::optional<JumpLambdas> lambdas;  // at the jump-edge filter's angle, when it is enabled
+  RayBounds bounds;                    // when the cell filter is enabled
+};
+// For the enabled jump-edge and cell filters of `o`.
+[[nodiscard]] PreparedRays PrepareRays(const RayTable& rays, const FilterSetOptions& o);
+
 // Neighbourhood filters: `prior` (empty = nothing rejected) says which pixels to ignore.
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                   const JumpEdgeOptions& o, Image<PixelFlags>& out);
+// With the λ tables of the frame's size made for the filter's angle.
+void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
+                  const JumpLambdas& lambdas, Image<PixelFlags>& out);
 void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
                      const FlyingPixelOptions& o, Image<PixelFlags>& out);
 // The enabled flying-pixel, jump-edge and Weingarten filters of `o`, in ApplyFilters' order,
 // ORing into `raised` (the frame's size); `frame.flags | raised` is what each treats as already
 // rejected. The per-pixel filters of `o` are not run here.
+// `prepared` (nullptr: computed or validated here) must come from PrepareRays(rays, o).
 void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
-                              const FilterSetOptions& o, Image<PixelFlags>& raised);
+                              const PreparedRays* prepared, const FilterSetOptions& o,
+                              Image<PixelFlags>& raised);
 
 void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                     const WeingartenCellOptions& o, Image<PixelFlags>& out);
+// With `bounds` = MakeRayBounds(rays).
+void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
+                    const RayBounds& bounds, const WeingartenCellOptions& o,
+                    Image<PixelFlags>& out);
 
 }  // namespace tofcam::filters_internal

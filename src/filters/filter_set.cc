@@ -1,7 +1,11 @@
 #include "tofcam/filters/filter_set.h"
 
+#include <memory>
+#include <utility>
+
 #include "../pipeline/stage_kernels.h"
 #include "filter_internal.h"
+#include "tofcam/core/error.h"
 
 namespace tofcam {
 namespace {
@@ -33,8 +37,16 @@ void FilterSetOptions::Validate() const {
 
 namespace filters_internal {
 
+PreparedRays PrepareRays(const RayTable& rays, const FilterSetOptions& o) {
+  PreparedRays p;
+  if (o.jump_edge_enabled) p.lambdas = MakeJumpLambdas(rays, o.jump_edge.max_angle_deg);
+  if (o.weingarten_enabled) p.bounds = MakeRayBounds(rays);
+  return p;
+}
+
 void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
-                              const FilterSetOptions& o, Image<PixelFlags>& raised) {
+                              const PreparedRays* prepared, const FilterSetOptions& o,
+                              Image<PixelFlags>& raised) {
   if (!o.flying_pixel_enabled && !o.jump_edge_enabled && !o.weingarten_enabled) return;
   // One scratch image for the combined flags, refreshed before each neighbourhood filter;
   // reused per thread (no allocation once the frame size is stable).
@@ -46,20 +58,31 @@ void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
   }
   if (o.jump_edge_enabled) {
     Combine(frame, raised, prior);
-    JumpEdgeInto(frame, prior, rays, o.jump_edge, raised);
+    if (prepared != nullptr && prepared->lambdas) {
+      JumpEdgeInto(frame, prior, *prepared->lambdas, raised);
+    } else {
+      JumpEdgeInto(frame, prior, rays, o.jump_edge, raised);
+    }
   }
   if (o.weingarten_enabled) {
     Combine(frame, raised, prior);
-    WeingartenInto(frame, prior, rays, o.weingarten, raised);
+    if (prepared != nullptr) {
+      WeingartenInto(frame, prior, rays, prepared->bounds, o.weingarten, raised);
+    } else {
+      WeingartenInto(frame, prior, rays, o.weingarten, raised);
+    }
   }
 }
 
 }  // namespace filters_internal
 
-void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays, const FilterSetOptions& o,
-                      Image<PixelFlags>& out) {
+namespace {
+
+// ApplyFiltersInto after its options were validated; `prepared` as in NeighbourhoodFiltersInto.
+void RunFilters(const MetricFrame& frame, const RayTable& rays,
+                const filters_internal::PreparedRays* prepared, const FilterSetOptions& o,
+                Image<PixelFlags>& out) {
   namespace fi = filters_internal;
-  o.Validate();
   fi::CheckFrame(frame, "filters");
   if (o.jump_edge_enabled || o.weingarten_enabled) fi::CheckRays(frame, rays, "filters");
   const kernels::PixelFilterPlan plan = kernels::PreparePixelFilters(frame, o);
@@ -69,7 +92,39 @@ void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays, const Filt
   kernels::PixelFiltersSpan(plan, out.size(), frame.radial_distance_m.data(), data(frame.amplitude),
                             data(frame.intensity), data(frame.delta_l_m), out.data());
   if (o.confidence_enabled) ConfidenceThresholdInto(frame, o.confidence, out);
-  fi::NeighbourhoodFiltersInto(frame, rays, o, out);
+  fi::NeighbourhoodFiltersInto(frame, rays, prepared, o, out);
+}
+
+}  // namespace
+
+void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays, const FilterSetOptions& o,
+                      Image<PixelFlags>& out) {
+  o.Validate();
+  RunFilters(frame, rays, nullptr, o, out);
+}
+
+struct FilterSet::Prepared {
+  filters_internal::PreparedRays rays;
+};
+
+FilterSet::FilterSet(FilterSetOptions options, RayTable rays)
+    : options_(std::move(options)), rays_(std::move(rays)) {
+  options_.Validate();
+  if (!rays_.x.SameSize(rays_.y) || !rays_.x.SameSize(rays_.z)) {
+    throw Error(ErrorCode::kMismatch, "filters: the ray table's x, y and z images differ in size");
+  }
+  prepared_ =
+      std::make_shared<const Prepared>(Prepared{filters_internal::PrepareRays(rays_, options_)});
+}
+
+void FilterSet::Process(const MetricFrame& frame, Image<PixelFlags>& out) const {
+  RunFilters(frame, rays_, &prepared_->rays, options_, out);
+}
+
+Image<PixelFlags> FilterSet::Process(const MetricFrame& frame) const {
+  Image<PixelFlags> out;
+  Process(frame, out);
+  return out;
 }
 
 Image<PixelFlags> ApplyFilters(const MetricFrame& frame, const RayTable& rays,

@@ -25,58 +25,23 @@ namespace {
 // λ depends only on the two rays and θ, so it is precomputed once per ray table; per pixel and
 // neighbour the test is one multiply and one compare, and it avoids the cancellation of
 // |n - p|² in float. λ is symmetric, so four tables (E, S, SE, SW pairs) serve all 8 neighbours.
+//
+// The λ tables together with the rays they were built from, to recognise the same table on the
+// next call of the RayTable form (FilterSet and Pipeline keep their own JumpLambdas instead).
 struct LambdaCache {
-  int width = 0, height = 0;
-  double angle_deg = 0.0;
-  std::vector<float> rays;  // copy of x, y, z to recognise the same table
-  // Padded layout (width + 2) x (height + 2); entry at p's padded index is λ(p, p + offset).
-  std::vector<float> east, south, south_east, south_west;
+  JumpLambdas lambdas;
+  std::vector<float> rays;  // copy of x, y, z
 };
 
 bool SameRays(const LambdaCache& c, const RayTable& rays, double angle_deg) {
   const std::size_t n = rays.x.size();
-  if (c.width != rays.x.width() || c.height != rays.x.height() || c.angle_deg != angle_deg ||
-      c.rays.size() != 3 * n) {
+  if (c.lambdas.width != rays.x.width() || c.lambdas.height != rays.x.height() ||
+      c.lambdas.angle_deg != angle_deg || c.rays.size() != 3 * n) {
     return false;
   }
   return std::memcmp(c.rays.data(), rays.x.data(), n * sizeof(float)) == 0 &&
          std::memcmp(c.rays.data() + n, rays.y.data(), n * sizeof(float)) == 0 &&
          std::memcmp(c.rays.data() + 2 * n, rays.z.data(), n * sizeof(float)) == 0;
-}
-
-void Build(LambdaCache& c, const RayTable& rays, double angle_deg) {
-  const int w = rays.x.width(), h = rays.x.height();
-  const std::size_t n = rays.x.size();
-  c.width = w;
-  c.height = h;
-  c.angle_deg = angle_deg;
-  c.rays.resize(3 * n);
-  std::memcpy(c.rays.data(), rays.x.data(), n * sizeof(float));
-  std::memcpy(c.rays.data() + n, rays.y.data(), n * sizeof(float));
-  std::memcpy(c.rays.data() + 2 * n, rays.z.data(), n * sizeof(float));
-  const double cot = std::abs(1.0 / std::tan(angle_deg * kPi / 180.0));
-  const std::ptrdiff_t pw = w + 2;
-  const std::size_t padded = static_cast<std::size_t>(pw) * static_cast<std::size_t>(h + 2);
-  // Pairs leaving the image get λ = +inf: d_p > d_n·inf never holds.
-  constexpr float kInf = std::numeric_limits<float>::infinity();
-  for (auto* t : {&c.east, &c.south, &c.south_east, &c.south_west}) t->assign(padded, kInf);
-  auto ray = [&](int r, int col) {
-    return Eigen::Vector3d(rays.x(r, col), rays.y(r, col), rays.z(r, col)).normalized();
-  };
-  auto lambda = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-    // atan2-free: cos from the dot product, sin from the cross product (accurate for small γ).
-    return static_cast<float>(a.dot(b) + cot * a.cross(b).norm());
-  };
-  for (int r = 0; r < h; ++r) {
-    for (int col = 0; col < w; ++col) {
-      const std::size_t i = static_cast<std::size_t>((r + 1) * pw + col + 1);
-      const Eigen::Vector3d p = ray(r, col);
-      if (col + 1 < w) c.east[i] = lambda(p, ray(r, col + 1));
-      if (r + 1 < h) c.south[i] = lambda(p, ray(r + 1, col));
-      if (r + 1 < h && col + 1 < w) c.south_east[i] = lambda(p, ray(r + 1, col + 1));
-      if (r + 1 < h && col > 0) c.south_west[i] = lambda(p, ray(r + 1, col - 1));
-    }
-  }
 }
 
 // d where usable (finite, > 0, no reject bit in the prior), else +inf.
@@ -117,13 +82,58 @@ TOFCAM_HOT_LOOP void JumpRow(int w, const float* __restrict up, const float* __r
 
 }  // namespace
 
+JumpLambdas MakeJumpLambdas(const RayTable& rays, double angle_deg) {
+  JumpLambdas c;
+  const int w = rays.x.width(), h = rays.x.height();
+  c.width = w;
+  c.height = h;
+  c.angle_deg = angle_deg;
+  const double cot = std::abs(1.0 / std::tan(angle_deg * kPi / 180.0));
+  const std::ptrdiff_t pw = w + 2;
+  const std::size_t padded = static_cast<std::size_t>(pw) * static_cast<std::size_t>(h + 2);
+  // Pairs leaving the image get λ = +inf: d_p > d_n·inf never holds.
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (auto* t : {&c.east, &c.south, &c.south_east, &c.south_west}) t->assign(padded, kInf);
+  auto ray = [&](int r, int col) {
+    return Eigen::Vector3d(rays.x(r, col), rays.y(r, col), rays.z(r, col)).normalized();
+  };
+  auto lambda = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    // atan2-free: cos from the dot product, sin from the cross product (accurate for small γ).
+    return static_cast<float>(a.dot(b) + cot * a.cross(b).norm());
+  };
+  for (int r = 0; r < h; ++r) {
+    for (int col = 0; col < w; ++col) {
+      const std::size_t i = static_cast<std::size_t>((r + 1) * pw + col + 1);
+      const Eigen::Vector3d p = ray(r, col);
+      if (col + 1 < w) c.east[i] = lambda(p, ray(r, col + 1));
+      if (r + 1 < h) c.south[i] = lambda(p, ray(r + 1, col));
+      if (r + 1 < h && col + 1 < w) c.south_east[i] = lambda(p, ray(r + 1, col + 1));
+      if (r + 1 < h && col > 0) c.south_west[i] = lambda(p, ray(r + 1, col - 1));
+    }
+  }
+  return c;
+}
+
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                   const JumpEdgeOptions& o, Image<PixelFlags>& out) {
+  thread_local LambdaCache cache;
+  if (!SameRays(cache, rays, o.max_angle_deg)) {
+    const std::size_t n = rays.x.size();
+    cache.rays.clear();  // an allocation failure below leaves the cache recognising no table
+    cache.lambdas = MakeJumpLambdas(rays, o.max_angle_deg);
+    cache.rays.resize(3 * n);
+    std::memcpy(cache.rays.data(), rays.x.data(), n * sizeof(float));
+    std::memcpy(cache.rays.data() + n, rays.y.data(), n * sizeof(float));
+    std::memcpy(cache.rays.data() + 2 * n, rays.z.data(), n * sizeof(float));
+  }
+  JumpEdgeInto(frame, prior, cache.lambdas, out);
+}
+
+void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
+                  const JumpLambdas& lambdas, Image<PixelFlags>& out) {
   const int w = frame.width(), h = frame.height();
   const std::ptrdiff_t pw = w + 2;
   const std::size_t padded = static_cast<std::size_t>(pw) * static_cast<std::size_t>(h + 2);
-  thread_local LambdaCache cache;
-  if (!SameRays(cache, rays, o.max_angle_deg)) Build(cache, rays, o.max_angle_deg);
 
   // Distances padded by one pixel; unusable pixels (and the pad) are +inf, which never makes a
   // neighbour "in front" (d_p > inf·λ is false) and marks the centre as not to be judged.
@@ -136,14 +146,14 @@ void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, cons
                     prior_px + static_cast<std::size_t>(r) * w, dist.data() + (r + 1) * pw + 1);
   }
 
+  const JumpLambdas& c = lambdas;
   for (int r = 0; r < h; ++r) {
     const std::ptrdiff_t base = (r + 1) * pw + 1;
     // λ of the pairs (p, neighbour): forward pairs at p, backward pairs at the neighbour.
     JumpRow(w, dist.data() + base - pw, dist.data() + base, dist.data() + base + pw,
-            cache.east.data() + base, cache.south.data() + base, cache.south_east.data() + base,
-            cache.south_west.data() + base, cache.south.data() + base - pw,
-            cache.south_east.data() + base - pw, cache.south_west.data() + base - pw,
-            out.Row(r).data());
+            c.east.data() + base, c.south.data() + base, c.south_east.data() + base,
+            c.south_west.data() + base, c.south.data() + base - pw, c.south_east.data() + base - pw,
+            c.south_west.data() + base - pw, out.Row(r).data());
   }
 }
 

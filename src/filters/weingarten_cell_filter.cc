@@ -153,43 +153,51 @@ TOFCAM_HOT_LOOP void LinearIndex(std::size_t n, const Box& box, std::int32_t dx,
   }
 }
 
-// Counts the points per cell. Four interleaved streams (quarters of the image): runs of
+// The count arrays are never cleared per frame: each entry holds a frame stamp in its top 8 bits
+// and the count in the low 24, and an entry with another frame's stamp counts as 0. (Clearing
+// the touched cells cost a list whose length depended on every count's load, serialising the
+// counting loop; clearing every pixel's cell cost as much again in stores.) A stamp is reused
+// after 255 frames, when the array is cleared once. Counts stay below 2^24 because the dense
+// path takes frames of fewer than 2^24 pixels only.
+constexpr int kCountBits = 24;
+constexpr std::uint32_t kCountMask = (std::uint32_t{1} << kCountBits) - 1;
+
+// counts[c] + 1 under `stamp`: the entry's count if it carries the stamp, else a first point.
+[[gnu::always_inline]] inline std::uint32_t Incremented(std::uint32_t v, std::uint32_t stamp) {
+  return (v ^ stamp) <= kCountMask ? v + 1 : stamp + 1;
+}
+
+// Counts the points per cell. Eight interleaved streams (eighths of the image): runs of
 // neighbouring pixels in one cell increment the same counter, a store-to-load chain of several
-// cycles per point; four independent chains overlap. Unusable points count into one of four
-// dummy cells (per stream, so they do not form one long chain either). Returns the number of
-// distinct cells touched, listed in `touched`.
-std::size_t CountDense(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
-                       std::uint32_t* __restrict counts, std::int32_t* __restrict touched) {
-  std::size_t m = 0;
+// cycles per point; eight independent chains overlap. Unusable points count into one of eight
+// dummy cells (per stream, so they do not form one long chain either).
+constexpr int kStreams = 8;
+
+void CountDense(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
+                std::uint32_t stamp, std::uint32_t* __restrict counts) {
   auto add = [&](std::size_t p, std::int32_t stream) {
-    std::int32_t c = idx[p];
-    c = c == dummy ? dummy + stream : c;
-    const std::uint32_t before = counts[c];
-    touched[m] = c;
-    m += before == 0 ? 1 : 0;
-    counts[c] = before + 1;
+    const std::int32_t c0 = idx[p];
+    const std::int32_t c = c0 == dummy ? dummy + stream : c0;
+    counts[c] = Incremented(counts[c], stamp);
   };
-  const std::size_t q = n / 4;
+  const std::size_t q = n / kStreams;
   for (std::size_t i = 0; i < q; ++i) {
-    add(i, 0);
-    add(i + q, 1);
-    add(i + 2 * q, 2);
-    add(i + 3 * q, 3);
+    for (std::int32_t k = 0; k < kStreams; ++k) add(i + static_cast<std::size_t>(k) * q, k);
   }
-  for (std::size_t p = 4 * q; p < n; ++p) add(p, 0);
-  return m;
+  for (std::size_t p = kStreams * q; p < n; ++p) add(p, 0);
 }
 
 // kSparseCell where the point's cell holds fewer than min_points points (dummy cells: unusable,
-// never flagged).
+// never flagged). Every usable point's cell carries this frame's stamp, so its count is
+// counts[c] - stamp and "fewer than min_points" is counts[c] < stamp + min_points.
 TOFCAM_HOT_LOOP void FlagDense(std::size_t n, const std::int32_t* __restrict idx,
                                std::int32_t dummy, const std::uint32_t* __restrict counts,
-                               std::uint32_t min_points, PixelFlags* __restrict f) {
+                               std::uint32_t limit, PixelFlags* __restrict f) {
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kSparseCell);
   for (std::size_t i = 0; i < n; ++i) {
     const std::int32_t c = idx[i];
     const unsigned sparse =
-        static_cast<unsigned>(c < dummy) & static_cast<unsigned>(counts[c] < min_points);
+        static_cast<unsigned>(c < dummy) & static_cast<unsigned>(counts[c] < limit);
     f[i] |= PixelFlags(static_cast<std::uint16_t>(sparse * bit));
   }
 }
@@ -334,11 +342,14 @@ TOFCAM_HOT_LOOP void DirectIndexFloat(std::size_t n, float inv_voxel, const Box&
   const float z0 = static_cast<float>(box.z0);
   for (std::size_t i = 0; i < n; ++i) {
     const bool usable = (d[i] > 0.0f) & (d[i] < kInf) & ((pf[i].bits() & kRejectMask) == 0);
+    // The rays are read whatever `usable` says: read inside the selects below, GCC makes them
+    // masked loads (vmaskmovps), several times slower than plain ones on AMD Zen.
+    const float ux = rx[i], uy = ry[i], uz = rz[i];
     // Unusable points are moved to the box corner first, so the conversion stays in range.
     const float s = usable ? d[i] * inv_voxel : 0.0f;
-    const float x = usable ? __builtin_floorf(s * rx[i]) - x0 : 0.0f;
-    const float y = usable ? __builtin_floorf(s * ry[i]) - y0 : 0.0f;
-    const float z = usable ? __builtin_floorf(s * rz[i]) - z0 : 0.0f;
+    const float x = usable ? __builtin_floorf(s * ux) - x0 : 0.0f;
+    const float y = usable ? __builtin_floorf(s * uy) - y0 : 0.0f;
+    const float z = usable ? __builtin_floorf(s * uz) - z0 : 0.0f;
     const std::int32_t linear = static_cast<std::int32_t>((z * dy + y) * dx + x);
     const std::int32_t m = -static_cast<std::int32_t>(usable);
     idx[i] = (linear & m) | (dummy & ~m);
@@ -347,13 +358,13 @@ TOFCAM_HOT_LOOP void DirectIndexFloat(std::size_t n, float inv_voxel, const Box&
 
 struct DenseScratch {
   std::vector<std::int32_t> idx;
-  std::vector<std::int32_t> touched;
-  std::vector<std::uint32_t> counts;  // all zero between calls
+  std::vector<std::uint32_t> counts;  // stamped counts (CountDense), or 0
+  std::uint32_t frame_stamp = 0;      // the last frame's stamp, 1..255 (0: none yet)
 };
 
 // The sparse case (most pixels unusable, e.g. after the other filters of the full set): runs of
 // eight pixels are tested at once and skipped when none is usable; the rest count and flag one
-// by one. Returns the number of distinct cells touched, listed in `touched`.
+// by one.
 // True when the eight indices at `idx` are all the dummy (`pair`: the dummy twice, as 64 bits).
 inline bool AllDummy(const std::int32_t* idx, std::uint64_t pair) {
   std::uint64_t v[4];
@@ -366,20 +377,16 @@ std::uint64_t DummyPair(std::int32_t dummy) {
   return u | (u << 32);
 }
 
-std::size_t CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
-                        std::uint32_t* __restrict counts, std::int32_t* __restrict touched) {
+void CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
+                 std::uint32_t stamp, std::uint32_t* __restrict counts) {
   const std::uint64_t pair = DummyPair(dummy);
-  std::size_t m = 0;
   // Branch-free inside a block, as in CountDense: usable and unusable pixels interleave at random
   // after the other filters, so "skip the unusable one" would mispredict about every other pixel.
   // Unusable points count into one of four dummy cells (by position, so no long chain).
   auto add = [&](std::size_t p) {
-    std::int32_t c = idx[p];
-    c = c == dummy ? dummy + static_cast<std::int32_t>(p & 3) : c;
-    const std::uint32_t before = counts[c];
-    touched[m] = c;
-    m += before == 0 ? 1 : 0;
-    counts[c] = before + 1;
+    const std::int32_t c0 = idx[p];
+    const std::int32_t c = c0 == dummy ? dummy + static_cast<std::int32_t>(p & 3) : c0;
+    counts[c] = Incremented(counts[c], stamp);
   };
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
@@ -387,18 +394,18 @@ std::size_t CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::
     for (std::size_t j = i; j < i + 8; ++j) add(j);
   }
   for (; i < n; ++i) add(i);
-  return m;
 }
 
+// FlagDense for the sparse case (`limit` = stamp + min_points as there).
 void FlagSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
-                const std::uint32_t* __restrict counts, std::uint32_t min_points,
+                const std::uint32_t* __restrict counts, std::uint32_t limit,
                 PixelFlags* __restrict f) {
   const std::uint64_t pair = DummyPair(dummy);
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kSparseCell);
   auto flag = [&](std::size_t p) {
     const std::int32_t c = idx[p];
     const unsigned sparse =
-        static_cast<unsigned>(c < dummy) & static_cast<unsigned>(counts[c] < min_points);
+        static_cast<unsigned>(c < dummy) & static_cast<unsigned>(counts[c] < limit);
     f[p] |= PixelFlags(static_cast<std::uint16_t>(sparse * bit));
   };
   std::size_t i = 0;
@@ -410,24 +417,28 @@ void FlagSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t 
 }
 
 // Counts in the dense array and flags; `idx` holds each pixel's linear index or `cells` (dummy).
-// With `usable` below a quarter of the pixels (typically the full filter set, where earlier
+// With `usable` below an eighth of the pixels (typically the full filter set, where earlier
 // filters rejected most of the frame) runs of unusable pixels are skipped eight at a time;
 // otherwise every pixel is counted, the unusable ones in dummy cells (vectorised flags).
 void CountAndFlag(std::size_t n, std::size_t usable, std::int32_t cells, std::uint32_t min_points,
                   DenseScratch& d, PixelFlags* out) {
-  d.touched.resize(n + 4);
-  if (d.counts.size() < static_cast<std::size_t>(cells) + 4) {
-    d.counts.assign(static_cast<std::size_t>(cells) + 4, 0);
+  if (d.counts.size() < static_cast<std::size_t>(cells) + kStreams) {
+    d.counts.assign(static_cast<std::size_t>(cells) + kStreams, 0);
+    d.frame_stamp = 0;
   }
-  std::size_t touched = 0;
+  if (++d.frame_stamp > 255) {
+    std::fill(d.counts.begin(), d.counts.end(), 0u);
+    d.frame_stamp = 1;
+  }
+  const std::uint32_t stamp = d.frame_stamp << kCountBits;
+  const std::uint32_t limit = stamp + min_points;  // min_points <= 1e6 < 2^24: no overflow
   if (8 * usable < n) {
-    touched = CountSparse(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
-    FlagSparse(n, d.idx.data(), cells, d.counts.data(), min_points, out);
+    CountSparse(n, d.idx.data(), cells, stamp, d.counts.data());
+    FlagSparse(n, d.idx.data(), cells, d.counts.data(), limit, out);
   } else {
-    touched = CountDense(n, d.idx.data(), cells, d.counts.data(), d.touched.data());
-    FlagDense(n, d.idx.data(), cells, d.counts.data(), min_points, out);
+    CountDense(n, d.idx.data(), cells, stamp, d.counts.data());
+    FlagDense(n, d.idx.data(), cells, d.counts.data(), limit, out);
   }
-  for (std::size_t k = 0; k < touched; ++k) d.counts[d.touched[k]] = 0;
 }
 
 // Largest box (cells) the dense path allocates for n points.
@@ -448,8 +459,23 @@ bool BoxFits(const Box& box, std::int64_t limit, std::int64_t& cells) {
 
 }  // namespace
 
+RayBounds MakeRayBounds(const RayTable& rays) {
+  const std::size_t n = rays.x.size();
+  Range rx{}, ry{}, rz{};
+  RayRange(n, rays.x.data(), rx);
+  RayRange(n, rays.y.data(), ry);
+  RayRange(n, rays.z.data(), rz);
+  return {rx.lo, rx.hi, ry.lo, ry.hi, rz.lo, rz.hi};
+}
+
 void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                     const WeingartenCellOptions& o, Image<PixelFlags>& out) {
+  WeingartenInto(frame, prior, rays, MakeRayBounds(rays), o, out);
+}
+
+void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
+                    const RayBounds& bounds, const WeingartenCellOptions& o,
+                    Image<PixelFlags>& out) {
   const int w = frame.width(), h = frame.height();
   const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
   const float inv_voxel = static_cast<float>(1.0 / o.voxel_size_m);
@@ -463,10 +489,8 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
   Range dr{};
   DistanceRange(n, d, pf, dr);
   if (!(dr.lo <= dr.hi)) return;  // no usable point
-  Range rx{}, ry{}, rz{};
-  RayRange(n, rays.x.data(), rx);
-  RayRange(n, rays.y.data(), ry);
-  RayRange(n, rays.z.data(), rz);
+  const Range rx{bounds.x_lo, bounds.x_hi}, ry{bounds.y_lo, bounds.y_hi};
+  const Range rz{bounds.z_lo, bounds.z_hi};
   Box box;
   CellRange(inv_voxel, dr, rx, box.x0, box.x1);
   CellRange(inv_voxel, dr, ry, box.y0, box.y1);
@@ -475,7 +499,9 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
   constexpr std::int32_t kInside = (1 << 20) - 2;  // |cell| below kMaxCell: FloorCell's clamp idle
   const bool inside = box.x0 >= -kInside && box.y0 >= -kInside && box.z0 >= -kInside &&
                       box.x1 <= kInside && box.y1 <= kInside && box.z1 <= kInside;
-  if (inside && BoxFits(box, limit, cells)) {
+  // The stamped counts need fewer than 2^24 points per cell: larger frames take the hash table.
+  const bool dense_ok = n <= kCountMask;
+  if (dense_ok && inside && BoxFits(box, limit, cells)) {
     dense.idx.resize(n);
     if (cells < (std::int64_t{1} << 24)) {
       DirectIndexFloat(n, inv_voxel, box, static_cast<float>(box.x1 - box.x0 + 1),
@@ -497,7 +523,7 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
   Cells(n, inv_voxel, d, rays.x.data(), rays.y.data(), rays.z.data(), pf, t.cx.data(), t.cy.data(),
         t.cz.data());
   Bounds(n, t.cx.data(), t.cy.data(), t.cz.data(), box);
-  if (BoxFits(box, limit, cells)) {
+  if (dense_ok && BoxFits(box, limit, cells)) {
     dense.idx.resize(n);
     LinearIndex(n, box, box.x1 - box.x0 + 1, box.y1 - box.y0 + 1, static_cast<std::int32_t>(cells),
                 t.cx.data(), t.cy.data(), t.cz.data(), dense.idx.data());

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <string>
 #include <utility>
 
@@ -91,6 +92,10 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
                     "' is not loaded (LoadPipelineCalibration() in tofcam/io/pipeline_config.h)");
   }
   rays_ = MakeRayTable(camera_.intrinsics);
+  if (options_.filters.jump_edge_enabled || options_.filters.weingarten_enabled) {
+    prepared_rays_ = std::make_shared<const filters_internal::PreparedRays>(
+        filters_internal::PrepareRays(rays_, options_.filters));
+  }
   table_ = pipeline_internal::PrepareTable(options_.calibration, camera_);
   if (options_.alternate_calibration) {
     // The alternate calibration must fit the same camera running at the alternate frequency.
@@ -238,7 +243,8 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   if (neighbourhood) {
     // m.flags = input flags | per-pixel filter bits, what the neighbourhood filters must treat
     // as rejected (as in ApplyFilters); they OR into the filter flags.
-    filters_internal::NeighbourhoodFiltersInto(m, rays_, filters, result.filter_flags);
+    filters_internal::NeighbourhoodFiltersInto(m, rays_, prepared_rays_.get(), filters,
+                                               result.filter_flags);
     MergeFlags(m, result.filter_flags);
   }
   if (options_.uncertainty_enabled) {

@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <string>
+#include <vector>
+
 #include "test_scene.h"
 #include "tofcam/core/error.h"
 
@@ -57,6 +61,113 @@ TEST(FilterSetTest, EqualsChainingThePublicFiltersInDocumentedOrder) {
   // The lone point at 0.7 m is alone in its cell and in front of its neighbours.
   EXPECT_TRUE(combined(70, 100).Has(Flag::kSparseCell));
   EXPECT_GT(raised, 100);  // the box outline
+}
+
+FilterSetOptions AllEnabled() {
+  FilterSetOptions o;
+  o.range_enabled = o.amplitude_enabled = o.saturation_enabled = o.accuracy_enabled = true;
+  o.flying_pixel_enabled = o.jump_edge_enabled = o.weingarten_enabled = true;
+  o.weingarten.min_points = 3;
+  return o;
+}
+
+// The scene with a deterministic ripple on the distances (frame k of a sequence), so that each
+// frame raises other flags.
+MetricFrame Rippled(const test::Scene& s, int k) {
+  MetricFrame f = s.frame;
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+    f.radial_distance_m[i] += 0.03f * std::sin(0.37f * static_cast<float>(i) + 1.3f * k);
+  }
+  f.radial_distance_m[static_cast<std::size_t>(100 + 31 * k)] = std::nanf("");
+  return f;
+}
+
+TEST(FilterSetTest, PreparedSetEqualsApplyFiltersBitForBit) {
+  const test::Scene s = Prepared();
+  std::vector<FilterSetOptions> sets;
+  sets.push_back(AllEnabled());
+  sets.push_back({});  // the paper's defaults
+  FilterSetOptions jump;
+  jump.jump_edge_enabled = true;
+  jump.jump_edge.max_angle_deg = 150.0;  // not the default: the prepared λ follow the options
+  sets.push_back(jump);
+  FilterSetOptions cells;
+  cells.weingarten_enabled = true;
+  cells.weingarten.voxel_size_m = 0.05;
+  sets.push_back(cells);
+  for (const FilterSetOptions& o : sets) {
+    const FilterSet set(o, s.rays);
+    const FilterSet copy = set;  // copies share the prepared tables
+    Image<PixelFlags> reused;
+    for (int k = 0; k < 4; ++k) {
+      const MetricFrame f = Rippled(s, k);
+      const Image<PixelFlags> want = ApplyFilters(f, s.rays, o);
+      set.Process(f, reused);
+      const Image<PixelFlags> fresh = copy.Process(f);
+      ASSERT_TRUE(reused.SameSize(want));
+      for (std::size_t i = 0; i < want.size(); ++i) {
+        ASSERT_EQ(reused[i].bits(), want[i].bits()) << "frame " << k << " pixel " << i;
+        ASSERT_EQ(fresh[i].bits(), want[i].bits()) << "frame " << k << " pixel " << i;
+      }
+    }
+  }
+}
+
+TEST(FilterSetTest, ApplyFiltersNoticesOtherRaysOfTheSameSize) {
+  // ApplyFilters keeps the jump test's λ per thread and must rebuild them for other rays; a
+  // wider lens (another focal length, same size) changes which pixels are jump edges.
+  const test::Scene s = Prepared();
+  CameraIntrinsics wide = CameraIntrinsics::SwissRangerSr2();
+  wide.fx_px *= 0.5;
+  wide.fy_px *= 0.5;
+  const RayTable wide_rays = MakeRayTable(wide);
+  FilterSetOptions o;
+  o.accuracy_enabled = o.saturation_enabled = false;
+  o.jump_edge_enabled = true;
+  o.jump_edge.max_angle_deg = 100.0;
+  const Image<PixelFlags> narrow = ApplyFilters(s.frame, s.rays, o);
+  const Image<PixelFlags> after = ApplyFilters(s.frame, wide_rays, o);  // right after `narrow`
+  const Image<PixelFlags> want = FilterSet(o, wide_rays).Process(s.frame);
+  int differ = 0;
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    differ += narrow[i] != want[i] ? 1 : 0;
+    ASSERT_EQ(after[i].bits(), want[i].bits()) << i;
+  }
+  EXPECT_GT(differ, 0);  // the two lenses do give other flags, so a stale λ would be seen
+}
+
+TEST(FilterSetTest, PreparedSetRefusesBadOptionsRaysAndFrames) {
+  const test::Scene s = Prepared();
+  FilterSetOptions bad;
+  bad.weingarten_enabled = true;
+  bad.weingarten.min_points = 0;
+  try {
+    const FilterSet set(bad, s.rays);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("min_points"), std::string::npos);
+  }
+  RayTable uneven = s.rays;
+  uneven.z = Image<float>(3, 3);
+  try {
+    const FilterSet set(AllEnabled(), uneven);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+  const FilterSet set(AllEnabled(), s.rays);
+  MetricFrame small;
+  small.radial_distance_m = Image<float>(8, 8, 1.0f);
+  small.amplitude = Image<float>(8, 8, 1000.0f);
+  small.intensity = Image<float>(8, 8, 2000.0f);
+  small.delta_l_m = Image<float>(8, 8, 0.01f);
+  try {
+    (void)set.Process(small);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
 }
 
 TEST(FilterSetTest, ErrorsAreReported) {

@@ -220,6 +220,61 @@ TEST(WeingartenCellFilterTest, MostlyRejectedFrameCountsOnlyItsUsablePoints) {
   }
 }
 
+TEST(WeingartenCellFilterTest, CountsStayExactOverManyFrames) {
+  // The dense count array is not cleared between frames: each entry carries a frame stamp, and
+  // stamps are reused after 255 frames, when the array is cleared. 300 frames on one thread mix
+  // near and far scenes, dense and mostly rejected frames (the dense and the sparse counting)
+  // and outliers that differ per frame but repeat after 255 frames: frame 265 is frame 10 again,
+  // so a count left over from frame 10 under the reused stamp would double its outliers' cells
+  // (1 -> 2 points, no longer sparse). Every frame must match an exact std::map count of the
+  // same float cells. Pixels 0 and 11 hold the nearest and farthest distance in every frame, so
+  // the cell box (and with it each cell's place in the array) stays the same.
+  CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
+  k.width = 48;
+  k.height = 36;
+  k.cx_px = 23.5;
+  k.cy_px = 17.5;
+  const test::Scene base = test::MakeScene(k);
+  WeingartenCellOptions o;
+  o.voxel_size_m = 0.1;
+  o.min_points = 2;
+  const float inv_voxel = static_cast<float>(1.0 / o.voxel_size_m);
+  int total_flagged = 0;
+  for (int frame = 0; frame < 300; ++frame) {
+    const int phase = frame % 255;
+    MetricFrame f = base.frame;
+    const float scale = frame % 5 == 1 ? 2.0f : 1.0f;
+    const bool mostly_rejected = frame % 3 == 1;
+    for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+      f.radial_distance_m[i] *= scale;
+      if (mostly_rejected && i % 11 != 0) f.flags[i] = Flag::kHighDeltaL;
+    }
+    for (int j = 0; j < 20; ++j) {  // outliers, different per phase
+      const std::size_t i = static_cast<std::size_t>(12 + (phase * 131 + j * 977) % (48 * 36 - 12));
+      f.radial_distance_m[i] = 0.4f + 0.013f * static_cast<float>((phase * 3 + 7 * j) % 500);
+    }
+    f.radial_distance_m[0] = 0.3f;
+    f.radial_distance_m[11] = 11.0f;
+    const Image<PixelFlags> out = WeingartenCellFilter(f, base.rays, o);
+    // Reference: the cells in the filter's float arithmetic, counted in a std::map.
+    auto cell = [&](std::size_t i) {
+      const float s = f.radial_distance_m[i] * inv_voxel;
+      auto q = [&](float ray) { return static_cast<long>(std::floor(s * ray)); };
+      return std::make_tuple(q(base.rays.x[i]), q(base.rays.y[i]), q(base.rays.z[i]));
+    };
+    std::map<std::tuple<long, long, long>, int> count;
+    for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+      if (f.flags[i].None()) ++count[cell(i)];
+    }
+    for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+      const bool want = f.flags[i].None() && count[cell(i)] < o.min_points;
+      ASSERT_EQ(out[i].Has(Flag::kSparseCell), want) << "frame " << frame << " pixel " << i;
+      total_flagged += want ? 1 : 0;
+    }
+  }
+  EXPECT_GT(total_flagged, 300 * 10);  // the outliers (and the sparse frames' points) are found
+}
+
 TEST(WeingartenCellFilterTest, ErrorsAreReported) {
   const Line l = MakeLine({1.0f});
   WeingartenCellOptions o;

@@ -2,6 +2,8 @@
 /// \file
 /// All filters behind one options struct, freely combined.
 
+#include <memory>
+
 #include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/frame.h"
 #include "tofcam/core/image.h"
@@ -52,5 +54,35 @@ struct FilterSetOptions {
 /// allocation in a per-frame loop), every pixel is overwritten.
 void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays,
                       const FilterSetOptions& options, Image<PixelFlags>& out);
+
+/// ApplyFilters for one camera, as a stage that is built once: the options are validated and
+/// everything the jump-edge and cell filters derive from the rays alone (the jump test's
+/// constant per pair of neighbouring rays, the rays' bounding box) is computed at construction,
+/// where ApplyFilters must check on every call that the rays are the ones it derived them from
+/// (a comparison of the whole ray table, 240 KB at SR-2 size). Same flags as ApplyFilters, bit
+/// for bit. Copies share the prepared tables; Process may run on several threads at once.
+class FilterSet {
+ public:
+  /// `rays`: the camera's (MakeRayTable), kept by value. Throws Error(kInvalidArgument) for
+  /// invalid options (as FilterSetOptions::Validate) and Error(kMismatch) when x, y and z differ
+  /// in size.
+  FilterSet(FilterSetOptions options, RayTable rays);
+
+  /// The flags ApplyFiltersInto(frame, rays(), options(), out) raises, into `out` (reused when it
+  /// has the frame's size, every pixel overwritten). Throws like ApplyFilters, e.g.
+  /// Error(kMismatch) when the frame is not the rays' size and a ray filter is enabled.
+  void Process(const MetricFrame& frame, Image<PixelFlags>& out) const;
+  /// Same, into a fresh image.
+  [[nodiscard]] Image<PixelFlags> Process(const MetricFrame& frame) const;
+
+  [[nodiscard]] const FilterSetOptions& options() const noexcept { return options_; }
+  [[nodiscard]] const RayTable& rays() const noexcept { return rays_; }
+
+ private:
+  struct Prepared;
+  FilterSetOptions options_;
+  RayTable rays_;
+  std::shared_ptr<const Prepared> prepared_;
+};
 
 }  // namespace tofcam

@@ -39,6 +39,9 @@
 #include "tofcam/pipeline/metric_conversion.h"
 
 namespace tofcam {
+namespace filters_internal {
+struct PreparedRays;  // src/filters/filter_internal.h
+}  // namespace filters_internal
 
 /// Every stage's options. Defaults: no calibration, ΔL on, the paper's accuracy threshold and
 /// saturation filters on, the paper's P-controller (MayProportional) on, point cloud on.
@@ -205,6 +208,8 @@ class Pipeline {
   PipelineOptions options_;
   CameraInfo camera_;
   RayTable rays_;
+  // What the jump-edge and cell filters derive from rays_ (null when neither is enabled).
+  std::shared_ptr<const filters_internal::PreparedRays> prepared_rays_;
   std::optional<DenseDistanceCorrection> table_;            // the calibration's, resampled once
   std::optional<DenseDistanceCorrection> alternate_table_;  // the alternate calibration's
   std::unique_ptr<IntegrationTimeController> controller_;
