@@ -23,6 +23,7 @@ struct CalibrationPlan {
   float table_inv_step = 0.0f;
   float table_last = 0.0f;  // index of the last sample, as float
   int table_last_segment = 0;
+  const float* table_intervals = nullptr;  // table->intervals_m when filled, else nullptr
 };
 
 // Checks the frame against the calibration (size, modulation frequency, exposure shift, size of

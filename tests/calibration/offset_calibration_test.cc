@@ -328,13 +328,27 @@ TEST(ApplyCalibrationTest, DenseTableAgreesWithTheCatmullRomLoopItReplaced) {
   EXPECT_LT(tolerance, 2e-6);  // ~1 µm: far below the millimetres the table corrects
 }
 
+void EveryPixelIsEquationOneThenTheTable(const DistanceCorrection& g);
+
 TEST(ApplyCalibrationTest, EveryPixelIsEquationOneThenTheDenseTableBitForBit) {
   // The per-pixel loop (vectorised, in an AVX2 and a baseline clone) must compute exactly
   // eq. 1 followed by l - DenseDistanceCorrection::Evaluate(l) wrapped into [0, L), in single
-  // precision. 157 x 123 pixels leave a scalar tail after the vector loop.
+  // precision. 157 x 123 pixels leave a scalar tail after the vector loop. Two corrections: the
+  // wiggle over all of [0, L), and one over 2-4 m only, whose ends hold (the index clamps).
+  DistanceCorrection short_range;
+  short_range.start_m = 2.0;
+  short_range.step_m = 0.05;
+  for (int k = 0; k <= 40; ++k) short_range.correction_m.push_back(0.01f * std::sin(0.7f * k));
+  for (const DistanceCorrection& g : {Wiggle(), short_range}) {
+    SCOPED_TRACE(g.start_m);
+    EveryPixelIsEquationOneThenTheTable(g);
+  }
+}
+
+void EveryPixelIsEquationOneThenTheTable(const DistanceCorrection& g) {
   const int w = 157, h = 123;
   OffsetCalibration c = MakeCalibration(w, h, 0.0f);
-  c.distance_correction = Wiggle();
+  c.distance_correction = g;
   MetricFrame m = MakeFrame(w, h, 0.0f);
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> distance(0.0f, static_cast<float>(kL20) * 0.999999f);
