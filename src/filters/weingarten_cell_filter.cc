@@ -136,7 +136,14 @@ TOFCAM_HOT_LOOP void Bounds(std::size_t n, const std::int32_t* __restrict cx,
   box = {x0, y0, z0, x1, y1, z1};
 }
 
-// Linear cell index in the box, or `dummy` (one past the box) for unusable points.
+// Unusable points get one of the kDummies cells past the box, by position (DummyOf): runs of
+// them then increment eight counters in turn instead of one (a chain of store-to-load latency).
+constexpr std::int32_t kDummies = 8;
+inline std::int32_t DummyOf(std::int32_t dummy, std::size_t i) {
+  return dummy + static_cast<std::int32_t>(i & (kDummies - 1));
+}
+
+// Linear cell index in the box, or a dummy cell (DummyOf, past the box) for unusable points.
 TOFCAM_HOT_LOOP void LinearIndex(std::size_t n, const Box& box, std::int32_t dx, std::int32_t dy,
                                  std::int32_t dummy, const std::int32_t* __restrict cx,
                                  const std::int32_t* __restrict cy,
@@ -149,7 +156,7 @@ TOFCAM_HOT_LOOP void LinearIndex(std::size_t n, const Box& box, std::int32_t dx,
     const std::int32_t x = (cx[i] & m) | (x0 & ~m), y = (cy[i] & m) | (y0 & ~m);
     const std::int32_t z = (cz[i] & m) | (z0 & ~m);
     const std::int32_t linear = ((z - z0) * dy + (y - y0)) * dx + (x - x0);
-    idx[i] = (linear & m) | (dummy & ~m);
+    idx[i] = (linear & m) | (DummyOf(dummy, i) & ~m);
   }
 }
 
@@ -169,27 +176,32 @@ constexpr std::uint32_t kCountMask = (std::uint32_t{1} << kCountBits) - 1;
 
 // Counts the points per cell. Eight interleaved streams (eighths of the image): runs of
 // neighbouring pixels in one cell increment the same counter, a store-to-load chain of several
-// cycles per point; eight independent chains overlap. Unusable points count into one of eight
-// dummy cells (per stream, so they do not form one long chain either).
-constexpr int kStreams = 8;
+// cycles per point; eight independent chains overlap. The streams start q pixels apart with
+// q = 1 (mod 8), so in one step they hit eight different dummy cells (DummyOf).
+constexpr std::size_t kStreams = 8;
 
-void CountDense(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
-                std::uint32_t stamp, std::uint32_t* __restrict counts) {
-  auto add = [&](std::size_t p, std::int32_t stream) {
-    const std::int32_t c0 = idx[p];
-    const std::int32_t c = c0 == dummy ? dummy + stream : c0;
+void CountDense(std::size_t n, const std::int32_t* __restrict idx, std::uint32_t stamp,
+                std::uint32_t* __restrict counts) {
+  auto add = [&](std::size_t p) {
+    const std::int32_t c = idx[p];
     counts[c] = Incremented(counts[c], stamp);
   };
-  const std::size_t q = n / kStreams;
-  for (std::size_t i = 0; i < q; ++i) {
-    for (std::int32_t k = 0; k < kStreams; ++k) add(i + static_cast<std::size_t>(k) * q, k);
+  const std::size_t q = n / kStreams + ((kStreams + 1 - n / kStreams % kStreams) % kStreams);
+  // Stream k covers [k q, (k + 1) q), the last one [7 q, n). Steps in which all eight streams
+  // still have a pixel, then each stream's rest.
+  const std::size_t steps = n > (kStreams - 1) * q ? std::min(q, n - (kStreams - 1) * q) : 0;
+  for (std::size_t i = 0; i < steps; ++i) {
+    for (std::size_t k = 0; k < kStreams; ++k) add(i + k * q);
   }
-  for (std::size_t p = kStreams * q; p < n; ++p) add(p, 0);
+  for (std::size_t k = 0; k < kStreams; ++k) {
+    const std::size_t end = k + 1 < kStreams ? std::min((k + 1) * q, n) : n;
+    for (std::size_t p = k * q + steps; p < end; ++p) add(p);
+  }
 }
 
-// kSparseCell where the point's cell holds fewer than min_points points (dummy cells: unusable,
-// never flagged). Every usable point's cell carries this frame's stamp, so its count is
-// counts[c] - stamp and "fewer than min_points" is counts[c] < stamp + min_points.
+// kSparseCell where the point's cell holds fewer than min_points points (dummy cells, from
+// `dummy` on: unusable, never flagged). Every usable point's cell carries this frame's stamp, so
+// its count is counts[c] - stamp and "fewer than min_points" is counts[c] < stamp + min_points.
 TOFCAM_HOT_LOOP void FlagDense(std::size_t n, const std::int32_t* __restrict idx,
                                std::int32_t dummy, const std::uint32_t* __restrict counts,
                                std::uint32_t limit, PixelFlags* __restrict f) {
@@ -325,7 +337,7 @@ TOFCAM_HOT_LOOP void DirectIndex(std::size_t n, float inv_voxel, const Box& box,
     const std::int32_t y = (FloorInBox(s * ry[i]) & m) | (y0 & ~m);
     const std::int32_t z = (FloorInBox(s * rz[i]) & m) | (z0 & ~m);
     const std::int32_t linear = ((z - z0) * dy + (y - y0)) * dx + (x - x0);
-    idx[i] = (linear & m) | (dummy & ~m);
+    idx[i] = (linear & m) | (DummyOf(dummy, i) & ~m);
   }
 }
 
@@ -352,7 +364,7 @@ TOFCAM_HOT_LOOP void DirectIndexFloat(std::size_t n, float inv_voxel, const Box&
     const float z = usable ? __builtin_floorf(s * uz) - z0 : 0.0f;
     const std::int32_t linear = static_cast<std::int32_t>((z * dy + y) * dx + x);
     const std::int32_t m = -static_cast<std::int32_t>(usable);
-    idx[i] = (linear & m) | (dummy & ~m);
+    idx[i] = (linear & m) | (DummyOf(dummy, i) & ~m);
   }
 }
 
@@ -365,32 +377,24 @@ struct DenseScratch {
 // The sparse case (most pixels unusable, e.g. after the other filters of the full set): runs of
 // eight pixels are tested at once and skipped when none is usable; the rest count and flag one
 // by one.
-// True when the eight indices at `idx` are all the dummy (`pair`: the dummy twice, as 64 bits).
-inline bool AllDummy(const std::int32_t* idx, std::uint64_t pair) {
-  std::uint64_t v[4];
-  std::memcpy(v, idx, sizeof v);
-  return ((v[0] ^ pair) | (v[1] ^ pair) | (v[2] ^ pair) | (v[3] ^ pair)) == 0;
-}
-
-std::uint64_t DummyPair(std::int32_t dummy) {
-  const auto u = static_cast<std::uint64_t>(static_cast<std::uint32_t>(dummy));
-  return u | (u << 32);
+// True when the eight indices at `idx` are all dummy cells (>= dummy).
+inline bool AllDummy(const std::int32_t* idx, std::int32_t dummy) {
+  std::int32_t lowest = idx[0];
+  for (int j = 1; j < 8; ++j) lowest = std::min(lowest, idx[j]);
+  return lowest >= dummy;
 }
 
 void CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
                  std::uint32_t stamp, std::uint32_t* __restrict counts) {
-  const std::uint64_t pair = DummyPair(dummy);
   // Branch-free inside a block, as in CountDense: usable and unusable pixels interleave at random
   // after the other filters, so "skip the unusable one" would mispredict about every other pixel.
-  // Unusable points count into one of four dummy cells (by position, so no long chain).
   auto add = [&](std::size_t p) {
-    const std::int32_t c0 = idx[p];
-    const std::int32_t c = c0 == dummy ? dummy + static_cast<std::int32_t>(p & 3) : c0;
+    const std::int32_t c = idx[p];
     counts[c] = Incremented(counts[c], stamp);
   };
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
-    if (AllDummy(idx + i, pair)) continue;
+    if (AllDummy(idx + i, dummy)) continue;
     for (std::size_t j = i; j < i + 8; ++j) add(j);
   }
   for (; i < n; ++i) add(i);
@@ -400,7 +404,6 @@ void CountSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t
 void FlagSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t dummy,
                 const std::uint32_t* __restrict counts, std::uint32_t limit,
                 PixelFlags* __restrict f) {
-  const std::uint64_t pair = DummyPair(dummy);
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kSparseCell);
   auto flag = [&](std::size_t p) {
     const std::int32_t c = idx[p];
@@ -410,20 +413,21 @@ void FlagSparse(std::size_t n, const std::int32_t* __restrict idx, std::int32_t 
   };
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
-    if (AllDummy(idx + i, pair)) continue;
+    if (AllDummy(idx + i, dummy)) continue;
     for (std::size_t j = i; j < i + 8; ++j) flag(j);
   }
   for (; i < n; ++i) flag(i);
 }
 
-// Counts in the dense array and flags; `idx` holds each pixel's linear index or `cells` (dummy).
+// Counts in the dense array and flags; `idx` holds each pixel's linear index or a dummy cell
+// (DummyOf(cells, i)).
 // With `usable` below an eighth of the pixels (typically the full filter set, where earlier
 // filters rejected most of the frame) runs of unusable pixels are skipped eight at a time;
 // otherwise every pixel is counted, the unusable ones in dummy cells (vectorised flags).
 void CountAndFlag(std::size_t n, std::size_t usable, std::int32_t cells, std::uint32_t min_points,
                   DenseScratch& d, PixelFlags* out) {
-  if (d.counts.size() < static_cast<std::size_t>(cells) + kStreams) {
-    d.counts.assign(static_cast<std::size_t>(cells) + kStreams, 0);
+  if (d.counts.size() < static_cast<std::size_t>(cells) + kDummies) {
+    d.counts.assign(static_cast<std::size_t>(cells) + kDummies, 0);
     d.frame_stamp = 0;
   }
   if (++d.frame_stamp > 255) {
@@ -436,7 +440,7 @@ void CountAndFlag(std::size_t n, std::size_t usable, std::int32_t cells, std::ui
     CountSparse(n, d.idx.data(), cells, stamp, d.counts.data());
     FlagSparse(n, d.idx.data(), cells, d.counts.data(), limit, out);
   } else {
-    CountDense(n, d.idx.data(), cells, stamp, d.counts.data());
+    CountDense(n, d.idx.data(), stamp, d.counts.data());
     FlagDense(n, d.idx.data(), cells, d.counts.data(), limit, out);
   }
 }

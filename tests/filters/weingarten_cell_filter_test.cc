@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <tuple>
@@ -273,6 +274,32 @@ TEST(WeingartenCellFilterTest, CountsStayExactOverManyFrames) {
     }
   }
   EXPECT_GT(total_flagged, 300 * 10);  // the outliers (and the sparse frames' points) are found
+}
+
+TEST(WeingartenCellFilterTest, EveryFrameLengthCountsEachPointOnce) {
+  // The counting splits the pixels into eight streams of q = 1 (mod 8) pixels with a remainder:
+  // every length from 1 to 200 pixels, some unusable, must give the exact counts (a pixel counted
+  // twice or not at all changes a cell of 2 or 3 points against min_points = 3).
+  for (int n = 1; n <= 200; ++n) {
+    const int cells = std::max(1, n / 3);  // about 3 points per cell: one more or less flips it
+    auto cell = [cells](int i) { return (i * 7) % cells; };
+    std::vector<float> d(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) d[i] = 0.05f + 0.1f * static_cast<float>(cell(i));
+    Line l = MakeLine(d);
+    for (int i = 0; i < n; i += 5) l.frame.flags[i] = Flag::kHighDeltaL;
+    WeingartenCellOptions o;
+    o.voxel_size_m = 0.1;
+    o.min_points = 3;
+    const Image<PixelFlags> out = WeingartenCellFilter(l.frame, l.rays, o);
+    std::map<int, int> count;  // cell z = floor(d / 0.1) = cell(i)
+    for (int i = 0; i < n; ++i) {
+      if (i % 5 != 0) ++count[cell(i)];
+    }
+    for (int i = 0; i < n; ++i) {
+      const bool want = i % 5 != 0 && count[cell(i)] < 3;
+      ASSERT_EQ(out[i].Has(Flag::kSparseCell), want) << "n " << n << " pixel " << i;
+    }
+  }
 }
 
 TEST(WeingartenCellFilterTest, ErrorsAreReported) {
