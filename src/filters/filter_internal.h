@@ -63,12 +63,18 @@ struct PreparedRays {
 
 // Neighbourhood filters: `prior` (empty = nothing rejected) says which pixels to ignore.
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
-                  const JumpEdgeOptions& o, Image<PixelFlags>& out);
-// With the λ tables of the frame's size made for the filter's angle.
+                  const JumpEdgeOptions& o, Image<PixelFlags>& out,
+                  Image<PixelFlags>* echo = nullptr);
+// With the λ tables of the frame's size made for the filter's angle. `echo` (may be null, may
+// be `prior` itself: the filter has read all of prior before it writes) gets the same bits ORed
+// in as `out`.
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
-                  const JumpLambdas& lambdas, Image<PixelFlags>& out);
+                  const JumpLambdas& lambdas, Image<PixelFlags>& out, Image<PixelFlags>* echo);
+// `echo` as for JumpEdgeInto; it may be `prior`: row r's bits are written after the rows up to
+// r + 1 were read from prior, and the filter reads no row of prior twice.
 void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
-                     const FlyingPixelOptions& o, Image<PixelFlags>& out);
+                     const FlyingPixelOptions& o, Image<PixelFlags>& out,
+                     Image<PixelFlags>* echo = nullptr);
 // The enabled flying-pixel, jump-edge and Weingarten filters of `o`, in ApplyFilters' order,
 // ORing into `raised` (the frame's size); `frame.flags | raised` is what each treats as already
 // rejected. The per-pixel filters of `o` are not run here.

@@ -52,20 +52,18 @@ void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
   // reused per thread (no allocation once the frame size is stable).
   thread_local Image<PixelFlags> prior;
   if (!prior.SameSize(raised)) prior = Image<PixelFlags>(raised.width(), raised.height());
-  if (o.flying_pixel_enabled) {
-    Combine(frame, raised, prior);
-    FlyingPixelInto(frame, prior, o.flying_pixel, raised);
-  }
+  // prior = frame flags | raised, kept so by the flying-pixel and jump-edge filters, which echo
+  // their bits into it (cheaper than combining the two images again before each filter).
+  Combine(frame, raised, prior);
+  if (o.flying_pixel_enabled) FlyingPixelInto(frame, prior, o.flying_pixel, raised, &prior);
   if (o.jump_edge_enabled) {
-    Combine(frame, raised, prior);
     if (prepared != nullptr && prepared->lambdas) {
-      JumpEdgeInto(frame, prior, *prepared->lambdas, raised);
+      JumpEdgeInto(frame, prior, *prepared->lambdas, raised, &prior);
     } else {
-      JumpEdgeInto(frame, prior, rays, o.jump_edge, raised);
+      JumpEdgeInto(frame, prior, rays, o.jump_edge, raised, &prior);
     }
   }
   if (o.weingarten_enabled) {
-    Combine(frame, raised, prior);
     if (prepared != nullptr) {
       WeingartenInto(frame, prior, rays, prepared->bounds, o.weingarten, raised);
     } else {

@@ -38,6 +38,7 @@ struct Scratch {
   std::vector<float> minmax;    // 4 slots x 2 streams (3-min, 3-max) x w
   std::vector<float> sums;      // 4 slots x 3 streams (count, Σa, Σa²) x w, computed on demand
   std::vector<std::uint8_t> candidate;  // one row, padded to a multiple of 8
+  std::vector<PixelFlags> echo_sink;    // one row
 };
 
 // The loops live in functions with __restrict parameters: with many pointers GCC otherwise
@@ -102,17 +103,19 @@ struct Thresholds {
 }
 
 // 1 where the centre is usable and the distance conditions hold (the rows' 3-min / 3-max up,
-// mid and down; `cw` the mid row's weights), else 0.
-TOFCAM_HOT_LOOP void DistanceCandidates(int w, const Thresholds& t, const float* __restrict lu,
-                                        const float* __restrict lm, const float* __restrict lv,
-                                        const float* __restrict hu, const float* __restrict hm,
-                                        const float* __restrict hv, const float* __restrict d,
-                                        const float* __restrict cw,
-                                        std::uint8_t* __restrict candidate) {
+// mid and down; `cw` the mid row's weights), else 0; returns how many (one pass, not two).
+TOFCAM_HOT_LOOP std::uint32_t DistanceCandidates(
+    int w, const Thresholds& t, const float* __restrict lu, const float* __restrict lm,
+    const float* __restrict lv, const float* __restrict hu, const float* __restrict hm,
+    const float* __restrict hv, const float* __restrict d, const float* __restrict cw,
+    std::uint8_t* __restrict candidate) {
+  std::uint32_t count = 0;
   for (int c = 0; c < w; ++c) {
-    candidate[c] = static_cast<std::uint8_t>(
-        DistancePass(lu[c], lm[c], lv[c], hu[c], hm[c], hv[c], d[c], cw[c], t));
+    const unsigned pass = DistancePass(lu[c], lm[c], lv[c], hu[c], hm[c], hv[c], d[c], cw[c], t);
+    candidate[c] = static_cast<std::uint8_t>(pass);
+    count += pass;
   }
+  return count;
 }
 
 // Population variance n·Σa² - (Σa)² over n², clamped against rounding below zero;
@@ -127,8 +130,9 @@ TOFCAM_HOT_LOOP void DistanceCandidates(int w, const Thresholds& t, const float*
 }
 
 // The whole rule over a row in one pass (3-min / 3-max rows lu..hv, horizontal sums nu..qv, the
-// mid row's weights cw), for rows with many candidates; ORs the flag into f and returns the
-// number of pixels that passed the distance conditions (to choose the next row's form).
+// mid row's weights cw), for rows with many candidates; ORs the flag into f and echo (see
+// FlyingPixelInto) and returns the number of pixels that passed the distance conditions (to
+// choose the next row's form).
 TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float* __restrict lu,
                                         const float* __restrict lm, const float* __restrict lv,
                                         const float* __restrict hu, const float* __restrict hm,
@@ -138,7 +142,7 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
                                         const float* __restrict su, const float* __restrict sm,
                                         const float* __restrict sv, const float* __restrict qu,
                                         const float* __restrict qm, const float* __restrict qv,
-                                        PixelFlags* __restrict f) {
+                                        PixelFlags* __restrict f, PixelFlags* __restrict echo) {
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
   std::uint32_t count = 0;
   for (int c = 0; c < w; ++c) {
@@ -148,14 +152,8 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
         pass & static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
                                                      qu[c] + qm[c] + qv[c], t));
     f[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
+    echo[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
   }
-  return count;
-}
-
-// Number of candidates in a row (candidate[c] is 0 or 1).
-TOFCAM_HOT_LOOP std::uint32_t CountCandidates(int w, const std::uint8_t* __restrict candidate) {
-  std::uint32_t count = 0;
-  for (int c = 0; c < w; ++c) count += candidate[c];
   return count;
 }
 
@@ -172,7 +170,7 @@ bool HighContrast(int c, const Thresholds& t, const Prepared& u, const Prepared&
 }  // namespace
 
 void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
-                     const FlyingPixelOptions& o, Image<PixelFlags>& out) {
+                     const FlyingPixelOptions& o, Image<PixelFlags>& out, Image<PixelFlags>* echo) {
   if (frame.amplitude.empty()) {
     throw Error(ErrorCode::kInvalidArgument, "flying pixel filter: amplitude is empty");
   }
@@ -185,6 +183,8 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   s.minmax.resize(4 * 2 * sw);
   s.sums.assign(4 * 3 * sw, 0.0f);  // the neutral slot's sums stay 0
   s.candidate.assign((sw + 7) / 8 * 8, 0);
+  // Without an echo image the dense rows echo into a scratch row nobody reads.
+  s.echo_sink.resize(sw);
   // Slot k in 0..3 (3 = neutral); pointers at column 0 of the padded rows.
   auto prepared = [&](int k) {
     float* base = s.prepared.data() + static_cast<std::size_t>(k) * 4 * pw + 1;
@@ -241,6 +241,7 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
     const Prepared u = prepared(ku), m = prepared(km), v = prepared(kv);
     const float* d = frame.radial_distance_m.Row(r).data();
     PixelFlags* f = out.Row(r).data();
+    PixelFlags* e = echo != nullptr ? echo->Row(r).data() : s.echo_sink.data();
     // Many candidates (noisy, unfiltered input): the whole rule in one vectorised pass.
     auto decide_row = [&] {
       const float* nu = sums(ku, r - 1);
@@ -248,16 +249,15 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       const float* nv = sums(kv, r + 1);
       const std::size_t count = DecideRow(
           w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv), d, m.w, nu, nm,
-          nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw, nv + 2 * sw, f);
+          nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw, nv + 2 * sw, f, e);
       dense = 16 * count > sw;
     };
     if (dense) {
       decide_row();
       continue;
     }
-    DistanceCandidates(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv), d,
-                       m.w, candidate);
-    const std::size_t count = CountCandidates(w, candidate);
+    const std::size_t count = DistanceCandidates(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku),
+                                                 hi_of(km), hi_of(kv), d, m.w, candidate);
     if (count == 0) continue;
     if (16 * count > sw) {
       decide_row();
@@ -269,7 +269,10 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       std::memcpy(&word, candidate + c0, sizeof word);
       if (word == 0) continue;
       for (int c = c0; c < std::min(c0 + 8, w); ++c) {
-        if (candidate[c] != 0 && HighContrast(c, t, u, m, v)) f[c] |= PixelFlags(bit);
+        if (candidate[c] != 0 && HighContrast(c, t, u, m, v)) {
+          f[c] |= PixelFlags(bit);
+          e[c] |= PixelFlags(bit);
+        }
       }
     }
   }

@@ -54,15 +54,15 @@ TOFCAM_HOT_LOOP void UsableDistances(int w, const float* __restrict d,
   }
 }
 
-// One row: p is flagged when any usable neighbour n has d_p > d_n λ(p, n). `up`, `mid`, `down`
-// are the padded distance rows at the row's first pixel; e/s/se/sw hold λ for the forward pairs
-// of this row, s_up/se_up/sw_up those of the row above (the backward pairs).
+// One row: p is flagged (in f and in echo) when any usable neighbour n has d_p > d_n λ(p, n). `up`,
+// `mid`, `down` are the padded distance rows at the row's first pixel; e/s/se/sw hold λ for the
+// forward pairs of this row, s_up/se_up/sw_up those of the row above (the backward pairs).
 TOFCAM_HOT_LOOP void JumpRow(int w, const float* __restrict up, const float* __restrict mid,
                              const float* __restrict down, const float* __restrict e,
                              const float* __restrict s, const float* __restrict se,
                              const float* __restrict sw, const float* __restrict s_up,
                              const float* __restrict se_up, const float* __restrict sw_up,
-                             PixelFlags* __restrict f) {
+                             PixelFlags* __restrict f, PixelFlags* __restrict echo) {
   constexpr float kInf = std::numeric_limits<float>::infinity();
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kJumpEdge);
   for (int c = 0; c < w; ++c) {
@@ -77,6 +77,7 @@ TOFCAM_HOT_LOOP void JumpRow(int w, const float* __restrict up, const float* __r
                           static_cast<unsigned>(dp > up[c + 1] * sw_up[c + 1]);
     const unsigned flag = jump & static_cast<unsigned>(dp < kInf);
     f[c] |= PixelFlags(static_cast<std::uint16_t>(flag * bit));
+    echo[c] |= PixelFlags(static_cast<std::uint16_t>(flag * bit));
   }
 }
 
@@ -115,7 +116,7 @@ JumpLambdas MakeJumpLambdas(const RayTable& rays, double angle_deg) {
 }
 
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
-                  const JumpEdgeOptions& o, Image<PixelFlags>& out) {
+                  const JumpEdgeOptions& o, Image<PixelFlags>& out, Image<PixelFlags>* echo) {
   thread_local LambdaCache cache;
   if (!SameRays(cache, rays, o.max_angle_deg)) {
     const std::size_t n = rays.x.size();
@@ -126,11 +127,11 @@ void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, cons
     std::memcpy(cache.rays.data() + n, rays.y.data(), n * sizeof(float));
     std::memcpy(cache.rays.data() + 2 * n, rays.z.data(), n * sizeof(float));
   }
-  JumpEdgeInto(frame, prior, cache.lambdas, out);
+  JumpEdgeInto(frame, prior, cache.lambdas, out, echo);
 }
 
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
-                  const JumpLambdas& lambdas, Image<PixelFlags>& out) {
+                  const JumpLambdas& lambdas, Image<PixelFlags>& out, Image<PixelFlags>* echo) {
   const int w = frame.width(), h = frame.height();
   const std::ptrdiff_t pw = w + 2;
   const std::size_t padded = static_cast<std::size_t>(pw) * static_cast<std::size_t>(h + 2);
@@ -147,13 +148,16 @@ void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   }
 
   const JumpLambdas& c = lambdas;
+  thread_local std::vector<PixelFlags> echo_sink;  // a row nobody reads, without an echo image
+  echo_sink.resize(static_cast<std::size_t>(w));
   for (int r = 0; r < h; ++r) {
     const std::ptrdiff_t base = (r + 1) * pw + 1;
     // λ of the pairs (p, neighbour): forward pairs at p, backward pairs at the neighbour.
     JumpRow(w, dist.data() + base - pw, dist.data() + base, dist.data() + base + pw,
             c.east.data() + base, c.south.data() + base, c.south_east.data() + base,
             c.south_west.data() + base, c.south.data() + base - pw, c.south_east.data() + base - pw,
-            c.south_west.data() + base - pw, out.Row(r).data());
+            c.south_west.data() + base - pw, out.Row(r).data(),
+            echo != nullptr ? echo->Row(r).data() : echo_sink.data());
   }
 }
 
