@@ -75,20 +75,22 @@ struct ColorLaw {
   bool black_outside, shade;
 };
 
-// One row into planar r, g, b bytes; the caller interleaves them into Rgb8 and passes
-// zero-filled rows for missing flags / amplitude. Written with vector extensions, eight pixels
-// per step: GCC's own vectorisation of the scalar form unrolled to 32 pixels with the float to
-// byte conversions spilled to the stack (about 7 cycles per pixel). Every operation is the
-// scalar law's, in its order: std::max(x, 0) is (x < 0 ? 0 : x) and std::min(x, 1) is
-// (1 < x ? 1 : x), including for NaN. Without shading v is exactly the visibility (the law's
-// 1 + 0·(s - 1) is 1 for every finite s), so the square root is skipped.
+// One row into interleaved RGB bytes (`rgb`, 3 per pixel); the caller passes zero-filled rows
+// for missing flags / amplitude. Written with vector extensions, eight pixels per step: GCC's own
+// vectorisation of the scalar form unrolled to 32 pixels with the float to byte conversions
+// spilled to the stack (about 7 cycles per pixel). Every operation is the scalar law's, in its
+// order: std::max(x, 0) is (x < 0 ? 0 : x) and std::min(x, 1) is (1 < x ? 1 : x), including for
+// NaN. Without shading v is exactly the visibility (the law's 1 + 0·(s - 1) is 1 for every
+// finite s), so the square root is skipped, and the law's bytes are those of v = 1 masked by
+// visibility (255·v·x + 0.5 truncates to 0 when v = 0); and since t lies in [0, 1] there,
+// 3 - 3t >= 0 and 1 - 3t <= 1 exactly, so those two clamps reduce to their other side.
 template <bool kShade>
-[[gnu::always_inline]] inline void ColorRowBody(
-    int w, const ColorLaw& law, const float* __restrict d, const PixelFlags* __restrict f,
-    const float* __restrict a, std::uint8_t* __restrict r, std::uint8_t* __restrict g,
-    std::uint8_t* __restrict b) {
+[[gnu::always_inline]] inline void ColorRowBody(int w, const ColorLaw& law,
+                                                const float* __restrict d,
+                                                const PixelFlags* __restrict f,
+                                                const float* __restrict a,
+                                                std::uint8_t* __restrict rgb) {
   using namespace simd;
-  typedef std::uint8_t B8 __attribute__((vector_size(8)));
   const float near = law.near, inv_range = law.inv_range, v_min = law.v_min;
   const float inv_ref = law.inv_ref;
   const I8 outside_ok = law.black_outside ? I8{} : I8{} - 1;
@@ -98,11 +100,21 @@ template <bool kShade>
     return one < x ? one : x;
   };
   typedef std::uint8_t B32 __attribute__((vector_size(32)));
-  // Values in [0, 255.5]: truncate to int32, keep each lane's low byte (a byte shuffle; a
-  // converting cast would be done lane by lane).
-  auto to_bytes = [](F8 x) {
-    const B32 bytes = reinterpret_cast<B32>(__builtin_convertvector(x, I8));
-    return __builtin_shufflevector(bytes, bytes, 0, 4, 8, 12, 16, 20, 24, 28);
+  typedef std::uint8_t B16 __attribute__((vector_size(16)));
+  typedef std::uint8_t B8 __attribute__((vector_size(8)));
+  // Three int32 vectors of values in [0, 255] (r, g, b of 8 pixels) into 24 bytes r0 g0 b0 r1
+  // ... b7 at `dst`: each pixel's bytes packed into one lane, then the lanes' low three bytes
+  // gathered by one byte shuffle, stored as 16 + 8 bytes (no store past the 24).
+  auto store_rgb = [](I8 r, I8 g, I8 b, std::uint8_t* dst) {
+    const B32 packed = reinterpret_cast<B32>(r | (g << 8) | (b << 16));
+    const B32 bytes =
+        __builtin_shufflevector(packed, packed, 0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, 16, 17, 18,
+                                20, 21, 22, 24, 25, 26, 28, 29, 30, 0, 0, 0, 0, 0, 0, 0, 0);
+    const B16 lo =
+        __builtin_shufflevector(bytes, bytes, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const B8 hi = __builtin_shufflevector(bytes, bytes, 16, 17, 18, 19, 20, 21, 22, 23);
+    std::memcpy(dst, &lo, 16);
+    std::memcpy(dst + 16, &hi, 8);
   };
   int i = 0;
   for (; i + 8 <= w; i += 8) {
@@ -116,8 +128,9 @@ template <bool kShade>
     // Invisible pixels get t = 0 (their bytes are 0 whatever t is; NaN t would convert to an
     // unspecified integer).
     const F8 t = Select(visible, clamp01(t_raw));
-    F8 v = Select(visible, one);
+    I8 rv, gv, bv;
     if constexpr (kShade) {
+      F8 v = Select(visible, one);
       F8 ai = LoadF8(a + i);
       ai = ai >= 0.0f ? ai : zero;  // NaN -> 0
       F8 root = ai * inv_ref;
@@ -125,14 +138,17 @@ template <bool kShade>
       const F8 m = root < one ? root : one;  // std::min(1, x) = (x < 1 ? x : 1)
       const F8 shading = v_min + (1.0f - v_min) * m;
       v = v * (1.0f + (shading - 1.0f));
+      const F8 scale = 255.0f * v;
+      rv = __builtin_convertvector(scale * clamp01(3.0f - 3.0f * t) + 0.5f, I8);
+      gv = __builtin_convertvector(scale * clamp01(1.0f - 3.0f * t) + 0.5f, I8);
+      bv = __builtin_convertvector(scale * clamp01(3.0f * t - 1.0f) + 0.5f, I8);
+    } else {
+      const F8 x_r = 3.0f - 3.0f * t, x_g = 1.0f - 3.0f * t;
+      rv = __builtin_convertvector(255.0f * (one < x_r ? one : x_r) + 0.5f, I8) & visible;
+      gv = __builtin_convertvector(255.0f * (x_g < zero ? zero : x_g) + 0.5f, I8) & visible;
+      bv = __builtin_convertvector(255.0f * clamp01(3.0f * t - 1.0f) + 0.5f, I8) & visible;
     }
-    const F8 scale = 255.0f * v;
-    const B8 rb = to_bytes(scale * clamp01(3.0f - 3.0f * t) + 0.5f);
-    const B8 gb = to_bytes(scale * clamp01(1.0f - 3.0f * t) + 0.5f);
-    const B8 bb = to_bytes(scale * clamp01(3.0f * t - 1.0f) + 0.5f);
-    std::memcpy(r + i, &rb, 8);
-    std::memcpy(g + i, &gb, 8);
-    std::memcpy(b + i, &bb, 8);
+    store_rgb(rv, gv, bv, rgb + 3 * i);
   }
   const unsigned outside = law.black_outside ? 0u : 1u;
   for (; i < w; ++i) {
@@ -150,47 +166,33 @@ template <bool kShade>
       v = v * (1.0f + (shading - 1.0f));
     }
     const float scale = 255.0f * v;
-    r[i] = static_cast<std::uint8_t>(
+    rgb[3 * i] = static_cast<std::uint8_t>(
         static_cast<int>(scale * std::min(std::max(3.0f - 3.0f * t, 0.0f), 1.0f) + 0.5f));
-    g[i] = static_cast<std::uint8_t>(
+    rgb[3 * i + 1] = static_cast<std::uint8_t>(
         static_cast<int>(scale * std::min(std::max(1.0f - 3.0f * t, 0.0f), 1.0f) + 0.5f));
-    b[i] = static_cast<std::uint8_t>(
+    rgb[3 * i + 2] = static_cast<std::uint8_t>(
         static_cast<int>(scale * std::min(std::max(3.0f * t - 1.0f, 0.0f), 1.0f) + 0.5f));
   }
 }
 
 TOFCAM_HOT_LOOP void ColorRowPlain(int w, const ColorLaw& law, const float* __restrict d,
                                    const PixelFlags* __restrict f, const float* __restrict a,
-                                   std::uint8_t* __restrict r, std::uint8_t* __restrict g,
-                                   std::uint8_t* __restrict b) {
-  ColorRowBody<false>(w, law, d, f, a, r, g, b);
+                                   std::uint8_t* __restrict rgb) {
+  ColorRowBody<false>(w, law, d, f, a, rgb);
 }
 
 TOFCAM_HOT_LOOP void ColorRowShaded(int w, const ColorLaw& law, const float* __restrict d,
                                     const PixelFlags* __restrict f, const float* __restrict a,
-                                    std::uint8_t* __restrict r, std::uint8_t* __restrict g,
-                                    std::uint8_t* __restrict b) {
-  ColorRowBody<true>(w, law, d, f, a, r, g, b);
+                                    std::uint8_t* __restrict rgb) {
+  ColorRowBody<true>(w, law, d, f, a, rgb);
 }
 
 void ColorRow(int w, const ColorLaw& law, const float* d, const PixelFlags* f, const float* a,
-              std::uint8_t* r, std::uint8_t* g, std::uint8_t* b) {
+              std::uint8_t* rgb) {
   if (law.shade) {
-    ColorRowShaded(w, law, d, f, a, r, g, b);
+    ColorRowShaded(w, law, d, f, a, rgb);
   } else {
-    ColorRowPlain(w, law, d, f, a, r, g, b);
-  }
-}
-
-// Interleaves planar r, g, b bytes into RGB triples (restrict pointers: GCC vectorises the
-// stride-3 store group with byte shuffles in the AVX2 clone).
-TOFCAM_HOT_LOOP void Interleave(int w, const std::uint8_t* __restrict r,
-                                const std::uint8_t* __restrict g, const std::uint8_t* __restrict b,
-                                std::uint8_t* __restrict rgb) {
-  for (int i = 0; i < w; ++i) {
-    rgb[3 * i] = r[i];
-    rgb[3 * i + 1] = g[i];
-    rgb[3 * i + 2] = b[i];
+    ColorRowPlain(w, law, d, f, a, rgb);
   }
 }
 
@@ -263,21 +265,17 @@ void FalseColorImageInto(const Image<float>& distance_m, const Image<PixelFlags>
                      o.out_of_range_black,
                      o.amplitude_shading};
   if (!out.SameSize(w, h)) out = Image<Rgb8>(w, h);
-  thread_local std::vector<std::uint8_t> planes;
   thread_local std::vector<float> zero_amplitude;
   thread_local std::vector<PixelFlags> zero_flags;
-  planes.resize(3 * static_cast<std::size_t>(w));
   zero_amplitude.assign(static_cast<std::size_t>(w), 0.0f);
   zero_flags.assign(static_cast<std::size_t>(w), PixelFlags());
-  std::uint8_t* r = planes.data();
-  std::uint8_t* g = r + w;
-  std::uint8_t* b = g + w;
+  static_assert(sizeof(Rgb8) == 3);
   for (int row = 0; row < h; ++row) {
+    // The vector loop stores 24 bytes per 8 pixels within the row (no padding written).
     ColorRow(w, law, distance_m.Row(row).data(),
              flags.empty() ? zero_flags.data() : flags.Row(row).data(),
-             amplitude.empty() ? zero_amplitude.data() : amplitude.Row(row).data(), r, g, b);
-    static_assert(sizeof(Rgb8) == 3);
-    Interleave(w, r, g, b, reinterpret_cast<std::uint8_t*>(out.Row(row).data()));
+             amplitude.empty() ? zero_amplitude.data() : amplitude.Row(row).data(),
+             reinterpret_cast<std::uint8_t*>(out.Row(row).data()));
   }
 }
 
