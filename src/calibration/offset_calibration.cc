@@ -7,18 +7,21 @@
 #include <string>
 #include <vector>
 
-#if defined(__x86_64__) && defined(__GNUC__)
-#include <immintrin.h>
-#define TOFCAM_EQ1_AVX2 1
-#else
-#define TOFCAM_EQ1_AVX2 0
-#endif
-
 #include "../filters/hot_loop.h"
 #include "../pipeline/stage_kernels.h"
 #include "calibration_kernel.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
+
+// The hand-written AVX2 table kernel (Eq1IntervalsAvx2): x86-64 GCC or clang, and not under
+// AddressSanitizer, which does not check the addresses of gathers (the baseline loop's table
+// reads stay checked there).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
+#include <immintrin.h>
+#define TOFCAM_EQ1_AVX2 1
+#else
+#define TOFCAM_EQ1_AVX2 0
+#endif
 
 namespace tofcam {
 namespace {
@@ -367,11 +370,13 @@ TOFCAM_HOT_LOOP void Eq1Table(std::size_t n, float range, float bias, const floa
 #if TOFCAM_EQ1_AVX2
 // Eq1Table with the interval table (g_j, g_{j+1} - g_j): the two values a pixel needs are one
 // 64-bit element, so 8 pixels take two 4-element gathers instead of two 8-element ones (16
-// loads), about a third faster on the 2-core Zen 4 test machine (docs/benchmarks.md). Written
-// with intrinsics because GCC does not turn the paired reads into 64-bit gathers. The same float
-// operations in the same order as Eq1Table (no FMA: the target is AVX2 alone), so the same
-// values bit for bit (tests/calibration/offset_calibration_test.cc). Returns the pixels done (a
-// multiple of 8); the caller finishes the rest with Eq1Table.
+// loads): eq. 1 + table 27 -> 23 us per SR-2 frame on the 2-core Zen 4 test machine
+// (docs/benchmarks.md). Written with intrinsics because GCC does not turn the paired reads into
+// 64-bit gathers. The same float operations in the same order as Eq1Table, so the same values bit
+// for bit (tests/calibration/offset_calibration_test.cc); this file is compiled with
+// -ffp-contract=off so that no compiler fuses either form's multiply-add into an FMA where the
+// other is not (clang contracts the scalar loop's expression, never the separate intrinsics).
+// Returns the pixels done (a multiple of 8); the caller finishes the rest with Eq1Table.
 __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
     std::size_t n, float range, float bias, const float* __restrict o,
     const PixelFlags* __restrict f, float* __restrict d, const float* __restrict intervals,

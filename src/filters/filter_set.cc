@@ -102,21 +102,33 @@ void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays, const Filt
 }
 
 struct FilterSet::Prepared {
-  filters_internal::PreparedRays rays;
+  FilterSetOptions options;
+  RayTable rays;
+  filters_internal::PreparedRays derived;
 };
 
-FilterSet::FilterSet(FilterSetOptions options, RayTable rays)
-    : options_(std::move(options)), rays_(std::move(rays)) {
-  options_.Validate();
-  if (!rays_.x.SameSize(rays_.y) || !rays_.x.SameSize(rays_.z)) {
+FilterSet::FilterSet(FilterSetOptions options, RayTable rays) {
+  options.Validate();
+  if (!rays.x.SameSize(rays.y) || !rays.x.SameSize(rays.z)) {
     throw Error(ErrorCode::kMismatch, "filters: the ray table's x, y and z images differ in size");
   }
-  prepared_ =
-      std::make_shared<const Prepared>(Prepared{filters_internal::PrepareRays(rays_, options_)});
+  filters_internal::PreparedRays derived = filters_internal::PrepareRays(rays, options);
+  prepared_ = std::make_shared<const Prepared>(
+      Prepared{std::move(options), std::move(rays), std::move(derived)});
 }
 
 void FilterSet::Process(const MetricFrame& frame, Image<PixelFlags>& out) const {
-  RunFilters(frame, rays_, &prepared_->rays, options_, out);
+  const Prepared& p = Get();
+  RunFilters(frame, p.rays, &p.derived, p.options, out);
+}
+
+const FilterSetOptions& FilterSet::options() const { return Get().options; }
+
+const RayTable& FilterSet::rays() const { return Get().rays; }
+
+const FilterSet::Prepared& FilterSet::Get() const {
+  if (!prepared_) throw Error(ErrorCode::kInvalidArgument, "filters: FilterSet used after a move");
+  return *prepared_;
 }
 
 Image<PixelFlags> FilterSet::Process(const MetricFrame& frame) const {

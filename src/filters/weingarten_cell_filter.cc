@@ -165,7 +165,7 @@ TOFCAM_HOT_LOOP void LinearIndex(std::size_t n, const Box& box, std::int32_t dx,
 // the touched cells cost a list whose length depended on every count's load, serialising the
 // counting loop; clearing every pixel's cell cost as much again in stores.) A stamp is reused
 // after 255 frames, when the array is cleared once. Counts stay below 2^24 because the dense
-// path takes frames of fewer than 2^24 pixels only.
+// path takes only frames with fewer usable points (and fewer than 8 * 2^24 pixels).
 constexpr int kCountBits = 24;
 constexpr std::uint32_t kCountMask = (std::uint32_t{1} << kCountBits) - 1;
 
@@ -503,8 +503,9 @@ void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, co
   constexpr std::int32_t kInside = (1 << 20) - 2;  // |cell| below kMaxCell: FloorCell's clamp idle
   const bool inside = box.x0 >= -kInside && box.y0 >= -kInside && box.z0 >= -kInside &&
                       box.x1 <= kInside && box.y1 <= kInside && box.z1 <= kInside;
-  // The stamped counts need fewer than 2^24 points per cell: larger frames take the hash table.
-  const bool dense_ok = n <= kCountMask;
+  // The stamped counts need fewer than 2^24 points per cell: a cell holds at most the usable
+  // points, a dummy cell an eighth of the pixels (+1). Beyond that the hash table counts.
+  const bool dense_ok = dr.count <= kCountMask && n / kDummies < kCountMask;
   if (dense_ok && inside && BoxFits(box, limit, cells)) {
     dense.idx.resize(n);
     if (cells < (std::int64_t{1} << 24)) {

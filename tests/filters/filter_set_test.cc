@@ -4,6 +4,8 @@
 
 #include <cmath>
 #include <string>
+#include <thread>
+#include <utility>
 #include <vector>
 
 #include "test_scene.h"
@@ -167,6 +169,45 @@ TEST(FilterSetTest, PreparedSetRefusesBadOptionsRaysAndFrames) {
     FAIL();
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+}
+
+TEST(FilterSetTest, ConcurrentProcessCallsGiveTheSameFlags) {
+  // Documented as safe from several threads (per-thread scratch, shared immutable tables).
+  const test::Scene s = Prepared();
+  const FilterSet set(AllEnabled(), s.rays);
+  std::vector<MetricFrame> frames;
+  std::vector<Image<PixelFlags>> want;
+  for (int k = 0; k < 4; ++k) {
+    frames.push_back(Rippled(s, k));
+    want.push_back(ApplyFilters(frames.back(), s.rays, AllEnabled()));
+  }
+  std::vector<int> mismatches(4, 0);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      Image<PixelFlags> out;
+      for (int rep = 0; rep < 20; ++rep) {
+        const int k = (t + rep) % 4;
+        set.Process(frames[k], out);
+        for (std::size_t i = 0; i < out.size(); ++i) mismatches[t] += out[i] != want[k][i];
+      }
+    });
+  }
+  for (std::thread& th : threads) th.join();
+  EXPECT_EQ(mismatches, std::vector<int>(4, 0));
+}
+
+TEST(FilterSetTest, MovedFromSetRefusesToRun) {
+  const test::Scene s = Prepared();
+  FilterSet set(AllEnabled(), s.rays);
+  const FilterSet moved = std::move(set);
+  EXPECT_TRUE(moved.Process(s.frame).SameSize(s.frame.radial_distance_m));
+  try {
+    (void)set.Process(s.frame);  // NOLINT(bugprone-use-after-move): the point of the test
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
   }
 }
 

@@ -64,9 +64,10 @@ struct DenseDistanceCorrection {
   double origin_m = 0.0;             ///< Distance of sample 0, m.
   double step_m = kDefaultMaxStepM;  ///< Sample spacing, m.
   std::vector<float> values_m;       ///< g at each sample, m; at least 2.
-  /// Per interval j: values_m[j] and values_m[j + 1] - values_m[j] (in float), interleaved, so
-  /// the per-pixel loop reads both with one 64-bit load. Filled by Resample; a table without it
-  /// (empty) is evaluated from values_m with the same result.
+  /// Per interval j: values_m[j] and values_m[j + 1] - values_m[j] (m, in float), interleaved,
+  /// so the per-pixel loop reads both with one 64-bit load: 2 (values_m.size() - 1) entries, or
+  /// empty (then values_m alone is used, same result). Filled by Resample and derived from
+  /// values_m: code that changes values_m afterwards must refill or clear it.
   std::vector<float> intervals_m;
   /// Bound on |g(x) - linear interpolation| from step_m and the knots (see above), m.
   double max_interpolation_error_m = 0.0;

@@ -60,7 +60,8 @@ void ApplyFiltersInto(const MetricFrame& frame, const RayTable& rays,
 /// constant per pair of neighbouring rays, the rays' bounding box) is computed at construction,
 /// where ApplyFilters must check on every call that the rays are the ones it derived them from
 /// (a comparison of the whole ray table, 240 KB at SR-2 size). Same flags as ApplyFilters, bit
-/// for bit. Copies share the prepared tables; Process may run on several threads at once.
+/// for bit. Copies share the options, rays and prepared tables (all immutable); Process may run
+/// on several threads at once. A moved-from FilterSet throws Error(kInvalidArgument) when used.
 class FilterSet {
  public:
   /// `rays`: the camera's (MakeRayTable), kept by value. Throws Error(kInvalidArgument) for
@@ -75,13 +76,12 @@ class FilterSet {
   /// Same, into a fresh image.
   [[nodiscard]] Image<PixelFlags> Process(const MetricFrame& frame) const;
 
-  [[nodiscard]] const FilterSetOptions& options() const noexcept { return options_; }
-  [[nodiscard]] const RayTable& rays() const noexcept { return rays_; }
+  [[nodiscard]] const FilterSetOptions& options() const;
+  [[nodiscard]] const RayTable& rays() const;
 
  private:
   struct Prepared;
-  FilterSetOptions options_;
-  RayTable rays_;
+  [[nodiscard]] const Prepared& Get() const;
   std::shared_ptr<const Prepared> prepared_;
 };
 
