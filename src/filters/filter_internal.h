@@ -79,9 +79,11 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
 // ORing into `raised` (the frame's size); `frame.flags | raised` is what each treats as already
 // rejected. The per-pixel filters of `o` are not run here.
 // `prepared` (nullptr: computed or validated here) must come from PrepareRays(rays, o).
+// `nothing_raised`: `raised` is all clear (no per-pixel filter ran before), which saves copying
+// the frame's flags when a single neighbourhood filter is enabled.
 void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
                               const PreparedRays* prepared, const FilterSetOptions& o,
-                              Image<PixelFlags>& raised);
+                              Image<PixelFlags>& raised, bool nothing_raised = false);
 
 void WeingartenInto(const MetricFrame& frame, const Image<PixelFlags>& prior, const RayTable& rays,
                     const WeingartenCellOptions& o, Image<PixelFlags>& out);

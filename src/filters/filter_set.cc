@@ -46,8 +46,28 @@ PreparedRays PrepareRays(const RayTable& rays, const FilterSetOptions& o) {
 
 void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
                               const PreparedRays* prepared, const FilterSetOptions& o,
-                              Image<PixelFlags>& raised) {
-  if (!o.flying_pixel_enabled && !o.jump_edge_enabled && !o.weingarten_enabled) return;
+                              Image<PixelFlags>& raised, bool nothing_raised) {
+  const int enabled = static_cast<int>(o.flying_pixel_enabled) +
+                      static_cast<int>(o.jump_edge_enabled) + static_cast<int>(o.weingarten_enabled);
+  if (enabled == 0) return;
+  if (nothing_raised && enabled == 1) {
+    // One neighbourhood filter after nothing: what counts as rejected is the frame's own flags,
+    // read in place (as the single-filter functions do) instead of copied.
+    if (o.flying_pixel_enabled) {
+      FlyingPixelInto(frame, frame.flags, o.flying_pixel, raised);
+    } else if (o.jump_edge_enabled) {
+      if (prepared != nullptr && prepared->lambdas) {
+        JumpEdgeInto(frame, frame.flags, *prepared->lambdas, raised, nullptr);
+      } else {
+        JumpEdgeInto(frame, frame.flags, rays, o.jump_edge, raised);
+      }
+    } else if (prepared != nullptr) {
+      WeingartenInto(frame, frame.flags, rays, prepared->bounds, o.weingarten, raised);
+    } else {
+      WeingartenInto(frame, frame.flags, rays, o.weingarten, raised);
+    }
+    return;
+  }
   // One scratch image for the combined flags, refreshed before each neighbourhood filter;
   // reused per thread (no allocation once the frame size is stable).
   thread_local Image<PixelFlags> prior;
@@ -90,7 +110,8 @@ void RunFilters(const MetricFrame& frame, const RayTable& rays,
   kernels::PixelFiltersSpan(plan, out.size(), frame.radial_distance_m.data(), data(frame.amplitude),
                             data(frame.intensity), data(frame.delta_l_m), out.data());
   if (o.confidence_enabled) ConfidenceThresholdInto(frame, o.confidence, out);
-  fi::NeighbourhoodFiltersInto(frame, rays, prepared, o, out);
+  fi::NeighbourhoodFiltersInto(frame, rays, prepared, o, out,
+                               /*nothing_raised=*/!plan.any && !o.confidence_enabled);
 }
 
 }  // namespace

@@ -115,6 +115,30 @@ TEST(FilterSetTest, PreparedSetEqualsApplyFiltersBitForBit) {
   }
 }
 
+TEST(FilterSetTest, OneNeighbourhoodFilterAloneEqualsItsOwnFunction) {
+  // With no per-pixel filter before it, a set of one neighbourhood filter reads the frame's
+  // flags in place: the same flags as the filter's public function on the frame.
+  const test::Scene s = Prepared();
+  for (int k = 0; k < 3; ++k) {
+    MetricFrame f = Rippled(s, k);
+    for (std::size_t i = 0; i < f.flags.size(); i += 13) f.flags[i] = Flag::kHighDeltaL;
+    FilterSetOptions o;
+    o.accuracy_enabled = o.saturation_enabled = false;
+    o.flying_pixel_enabled = true;
+    EXPECT_EQ(FilterSet(o, s.rays).Process(f), FlyingPixelFilter(f, o.flying_pixel));
+    EXPECT_EQ(ApplyFilters(f, s.rays, o), FlyingPixelFilter(f, o.flying_pixel));
+    o.flying_pixel_enabled = false;
+    o.jump_edge_enabled = true;
+    EXPECT_EQ(FilterSet(o, s.rays).Process(f), JumpEdgeFilter(f, s.rays, o.jump_edge));
+    EXPECT_EQ(ApplyFilters(f, s.rays, o), JumpEdgeFilter(f, s.rays, o.jump_edge));
+    o.jump_edge_enabled = false;
+    o.weingarten_enabled = true;
+    o.weingarten.min_points = 3;
+    EXPECT_EQ(FilterSet(o, s.rays).Process(f), WeingartenCellFilter(f, s.rays, o.weingarten));
+    EXPECT_EQ(ApplyFilters(f, s.rays, o), WeingartenCellFilter(f, s.rays, o.weingarten));
+  }
+}
+
 TEST(FilterSetTest, ApplyFiltersNoticesOtherRaysOfTheSameSize) {
   // ApplyFilters keeps the jump test's λ per thread and must rebuild them for other rays; a
   // wider lens (another focal length, same size) changes which pixels are jump edges.
