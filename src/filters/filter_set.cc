@@ -48,7 +48,8 @@ void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
                               const PreparedRays* prepared, const FilterSetOptions& o,
                               Image<PixelFlags>& raised, bool nothing_raised) {
   const int enabled = static_cast<int>(o.flying_pixel_enabled) +
-                      static_cast<int>(o.jump_edge_enabled) + static_cast<int>(o.weingarten_enabled);
+                      static_cast<int>(o.jump_edge_enabled) +
+                      static_cast<int>(o.weingarten_enabled);
   if (enabled == 0) return;
   if (nothing_raised && enabled == 1) {
     // One neighbourhood filter after nothing: what counts as rejected is the frame's own flags,
