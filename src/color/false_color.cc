@@ -19,7 +19,7 @@ namespace tofcam {
 namespace {
 
 constexpr float kMaxF = std::numeric_limits<float>::max();
-constexpr std::int32_t kMaxFBits = 0x7f7fffff;  // the bit pattern of kMaxF
+constexpr std::int32_t kInfBits = 0x7f800000;  // the bit pattern of +inf
 
 std::uint8_t ToByte(float v) {  // v in [0, 1]; round half up
   return static_cast<std::uint8_t>(static_cast<int>(v * 255.0f + 0.5f));
@@ -93,7 +93,6 @@ template <bool kShade>
   using namespace simd;
   const float near = law.near, inv_range = law.inv_range, v_min = law.v_min;
   const float inv_ref = law.inv_ref;
-  const I8 outside_ok = law.black_outside ? I8{} : I8{} - 1;
   const F8 zero = {}, one = zero + 1.0f;
   auto clamp01 = [&](F8 x) {
     x = x < zero ? zero : x;
@@ -105,8 +104,8 @@ template <bool kShade>
   // Three int32 vectors of values in [0, 255] (r, g, b of 8 pixels) into 24 bytes r0 g0 b0 r1
   // ... b7 at `dst`: each pixel's bytes packed into one lane, then the lanes' low three bytes
   // gathered by one byte shuffle, stored as 16 + 8 bytes (no store past the 24).
-  auto store_rgb = [](I8 r, I8 g, I8 b, std::uint8_t* dst) {
-    const B32 packed = reinterpret_cast<B32>(r | (g << 8) | (b << 16));
+  auto store_rgb = [](I8 r, I8 g, I8 b, I8 mask, std::uint8_t* dst) {
+    const B32 packed = reinterpret_cast<B32>((r | (g << 8) | (b << 16)) & mask);
     const B32 bytes =
         __builtin_shufflevector(packed, packed, 0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, 16, 17, 18,
                                 20, 21, 22, 24, 25, 26, 28, 29, 30, 0, 0, 0, 0, 0, 0, 0, 0);
@@ -120,11 +119,11 @@ template <bool kShade>
   for (; i + 8 <= w; i += 8) {
     const F8 dv = LoadF8(d + i);
     const F8 t_raw = (dv - near) * inv_range;
-    const I8 in_range = (t_raw >= 0.0f) & (t_raw <= 1.0f);
-    // |d| <= max float (bit patterns of non-negative floats order as integers; NaN and inf
-    // lie above): false for NaN and ±inf.
-    const I8 visible = (AbsBits(dv) <= kMaxFBits) & ((LoadFlags8(f + i) & kRejectMask) == 0) &
-                       (in_range | outside_ok);
+    // |d| <= max float, i.e. its bits below those of +inf (bit patterns of non-negative floats
+    // order as integers; NaN and inf lie above): false for NaN and ±inf. Written as a strict
+    // "greater than", the one integer compare AVX2 has.
+    I8 visible = (kInfBits > AbsBits(dv)) & ((LoadFlags8(f + i) & kRejectMask) == 0);
+    if (law.black_outside) visible &= (t_raw >= 0.0f) & (t_raw <= 1.0f);
     // Invisible pixels get t = 0 (their bytes are 0 whatever t is; NaN t would convert to an
     // unspecified integer).
     const F8 t = Select(visible, clamp01(t_raw));
@@ -143,12 +142,14 @@ template <bool kShade>
       gv = __builtin_convertvector(scale * clamp01(1.0f - 3.0f * t) + 0.5f, I8);
       bv = __builtin_convertvector(scale * clamp01(3.0f * t - 1.0f) + 0.5f, I8);
     } else {
+      // The visibility mask is applied once to the packed bytes (store_rgb).
       const F8 x_r = 3.0f - 3.0f * t, x_g = 1.0f - 3.0f * t;
-      rv = __builtin_convertvector(255.0f * (one < x_r ? one : x_r) + 0.5f, I8) & visible;
-      gv = __builtin_convertvector(255.0f * (x_g < zero ? zero : x_g) + 0.5f, I8) & visible;
-      bv = __builtin_convertvector(255.0f * clamp01(3.0f * t - 1.0f) + 0.5f, I8) & visible;
+      rv = __builtin_convertvector(255.0f * (one < x_r ? one : x_r) + 0.5f, I8);
+      gv = __builtin_convertvector(255.0f * (x_g < zero ? zero : x_g) + 0.5f, I8);
+      bv = __builtin_convertvector(255.0f * clamp01(3.0f * t - 1.0f) + 0.5f, I8);
     }
-    store_rgb(rv, gv, bv, rgb + 3 * i);
+    // Shaded: v is 0 for invisible pixels already, so the mask changes nothing there.
+    store_rgb(rv, gv, bv, visible, rgb + 3 * i);
   }
   const unsigned outside = law.black_outside ? 0u : 1u;
   for (; i < w; ++i) {
