@@ -51,44 +51,32 @@ void NeighbourhoodFiltersInto(const MetricFrame& frame, const RayTable& rays,
                       static_cast<int>(o.jump_edge_enabled) +
                       static_cast<int>(o.weingarten_enabled);
   if (enabled == 0) return;
-  if (nothing_raised && enabled == 1) {
-    // One neighbourhood filter after nothing: what counts as rejected is the frame's own flags,
-    // read in place (as the single-filter functions do) instead of copied.
-    if (o.flying_pixel_enabled) {
-      FlyingPixelInto(frame, frame.flags, o.flying_pixel, raised);
-    } else if (o.jump_edge_enabled) {
-      if (prepared != nullptr && prepared->lambdas) {
-        JumpEdgeInto(frame, frame.flags, *prepared->lambdas, raised, nullptr);
-      } else {
-        JumpEdgeInto(frame, frame.flags, rays, o.jump_edge, raised);
-      }
-    } else if (prepared != nullptr) {
-      WeingartenInto(frame, frame.flags, rays, prepared->bounds, o.weingarten, raised);
-    } else {
-      WeingartenInto(frame, frame.flags, rays, o.weingarten, raised);
-    }
-    return;
+  // What each filter treats as already rejected: frame flags | raised so far. One filter after
+  // nothing reads the frame's own flags in place (as the single-filter functions do). Otherwise
+  // a per-thread scratch image holds the union, combined once and kept so by the flying-pixel
+  // and jump-edge filters, which echo their bits into it (cheaper than combining the two images
+  // again before each filter); no allocation once the frame size is stable.
+  const Image<PixelFlags>* prior = &frame.flags;
+  Image<PixelFlags>* echo = nullptr;
+  if (!(nothing_raised && enabled == 1)) {
+    thread_local Image<PixelFlags> scratch;
+    if (!scratch.SameSize(raised)) scratch = Image<PixelFlags>(raised.width(), raised.height());
+    Combine(frame, raised, scratch);
+    prior = echo = &scratch;
   }
-  // One scratch image for the combined flags, refreshed before each neighbourhood filter;
-  // reused per thread (no allocation once the frame size is stable).
-  thread_local Image<PixelFlags> prior;
-  if (!prior.SameSize(raised)) prior = Image<PixelFlags>(raised.width(), raised.height());
-  // prior = frame flags | raised, kept so by the flying-pixel and jump-edge filters, which echo
-  // their bits into it (cheaper than combining the two images again before each filter).
-  Combine(frame, raised, prior);
-  if (o.flying_pixel_enabled) FlyingPixelInto(frame, prior, o.flying_pixel, raised, &prior);
+  if (o.flying_pixel_enabled) FlyingPixelInto(frame, *prior, o.flying_pixel, raised, echo);
   if (o.jump_edge_enabled) {
     if (prepared != nullptr && prepared->lambdas) {
-      JumpEdgeInto(frame, prior, *prepared->lambdas, raised, &prior);
+      JumpEdgeInto(frame, *prior, *prepared->lambdas, raised, echo);
     } else {
-      JumpEdgeInto(frame, prior, rays, o.jump_edge, raised, &prior);
+      JumpEdgeInto(frame, *prior, rays, o.jump_edge, raised, echo);
     }
   }
   if (o.weingarten_enabled) {
     if (prepared != nullptr) {
-      WeingartenInto(frame, prior, rays, prepared->bounds, o.weingarten, raised);
+      WeingartenInto(frame, *prior, rays, prepared->bounds, o.weingarten, raised);
     } else {
-      WeingartenInto(frame, prior, rays, o.weingarten, raised);
+      WeingartenInto(frame, *prior, rays, o.weingarten, raised);
     }
   }
 }
