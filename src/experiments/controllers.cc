@@ -126,15 +126,15 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
                    "valid_fraction", "rmse_m"},
                   {},
                   false};
-  Table summary{"controllers_summary",
-                {"controller", "I_A / c_0 / V_p", "registers used (min-max)",
-                 "settle frames after steps (3.0/4.5/5.0/7.0/8.0 s)",
-                 "settle frames after each change ends (3.5/5.0/7.0/8.0 s)",
-                 "steady-state |Ī-I_A|/I_A",
-                 "same, where I_A is in reach", "register reversals > 2", "frames with saturation",
-                 "frames > 1 % saturated", "longest run > 1 %", "mean valid %", "mean RMSE"},
-                {},
-                true};
+  Table summary{
+      "controllers_summary",
+      {"controller", "I_A / c_0 / V_p", "registers used (min-max)",
+       "settle frames after steps (3.0/4.5/5.0/7.0/8.0 s)",
+       "settle frames after each change ends (3.5/5.0/7.0/8.0 s)", "steady-state |Ī-I_A|/I_A",
+       "same, where I_A is in reach", "register reversals > 2", "frames with saturation",
+       "frames > 1 % saturated", "longest run > 1 %", "mean valid %", "mean RMSE"},
+      {},
+      true};
   struct Outcome {
     std::string label;
     double steady = 0, steady_reachable = 0, valid = 0, rmse = 0;
@@ -367,12 +367,11 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
 
   // The same controllers on the `demo` sequence (a hand enters the view at 30 frames/s) and the
   // static `hand` scene: settling, clipping and valid pixels.
-  Table others{
-      "controllers_other_scenes",
-      {"scene", "controller", "settle frames after each change ends", "frames > 1 % saturated",
-       "longest run > 1 %", "mean valid %"},
-      {},
-      true};
+  Table others{"controllers_other_scenes",
+               {"scene", "controller", "settle frames after each change ends",
+                "frames > 1 % saturated", "longest run > 1 %", "mean valid %"},
+               {},
+               true};
   struct OtherScene {
     std::string name;
     double seconds;
@@ -381,10 +380,10 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     // register.
     std::vector<Segment> changes;
   };
-  const std::vector<OtherScene> scenes = {
-      {"demo", 10.0 * std::min(1.0, std::max(o.effort, 0.3)),
-       {{1.5, 2.5}, {4.5, 5.5}, {6.0, 6.0}, {8.5, 8.5}}},
-      {"hand", 2.0, {{0.0, 0.0}}}};
+  const std::vector<OtherScene> scenes = {{"demo",
+                                           10.0 * std::min(1.0, std::max(o.effort, 0.3)),
+                                           {{1.5, 2.5}, {4.5, 5.5}, {6.0, 6.0}, {8.5, 8.5}}},
+                                          {"hand", 2.0, {{0.0, 0.0}}}};
   for (const auto& [scene, seconds, scene_changes] : scenes) {
     int seed = 300;
     for (const Setting& setting : settings) {
