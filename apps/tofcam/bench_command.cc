@@ -264,9 +264,13 @@ std::vector<Stage> MakeStages() {
       {"filter: flying pixel", "flying_pixel"},   {"filter: jump edge", "jump_edge"},
       {"filter: Weingarten cells", "weingarten"}};
   const std::map<std::string, double> filter_bytes = {
-      {"accuracy", 4 + 2 + 2},       {"amplitude", 4 + 2 + 2},    {"saturation", 4 + 4 + 2 + 2},
+      {"accuracy", 4 + 2 + 2},
+      {"amplitude", 4 + 2 + 2},
+      {"saturation", 4 + 4 + 2 + 2},
       // The flying-pixel filter reads the amplitude as well as the distance (its contrast test).
-      {"range", 4 + 2 + 2},          {"flying_pixel", 4 + 4 + 2 + 2}, {"jump_edge", 4 + 12 + 2 + 2},
+      {"range", 4 + 2 + 2},
+      {"flying_pixel", 4 + 4 + 2 + 2},
+      {"jump_edge", 4 + 12 + 2 + 2},
       {"weingarten", 4 + 12 + 2 + 2}};
   // The filters as a camera's loop runs them: a FilterSet built once for the camera's rays.
   auto filter_row = [](std::string key) {

@@ -302,13 +302,14 @@ TEST(ExperimentsTest, ControllersDefaultHoldsTheSetPointTheOldDefaultsDidNot) {
   }
   // The same targets on the demo sequence (hand enters) and the static hand scene, against the
   // printed law and the vendor's histogram (measured at full effort: demo 5 of 301 frames, run
-  // 3; hand 1 of 60), and settling.
-  for (const std::string scene : {"demo", "hand"}) {
+  // 3; hand 1 of 60), and settling, also on the two sequences with the hand's moves made steps.
+  for (const std::string scene : {"demo", "hand", "approach, hand steps", "demo, hand steps"}) {
     const auto n = [&](const std::string& label, const std::string& key) {
       return r.metrics.at(scene + "." + label + "." + key);
     };
     EXPECT_LE(n(model, "frames_over_1pct_saturated"), 0.05 * n(model, "frames")) << scene;
-    // Full effort: demo 0/0/3/1 frames, hand 2.
+    // Full effort: demo 0/0/3/1 frames, hand 2; with the hand's moves made steps, approach
+    // 2/1/0/1 and demo 2/1/3/1 (a clipped frame, the back-off, the model's register).
     EXPECT_GE(n(model, "max_settle_frames_after_change"), 0.0) << scene;
     EXPECT_LE(n(model, "max_settle_frames_after_change"), 3.0) << scene;
     for (const std::string other : {"may-proportional (scheduled V_p)", "vendor-histogram"}) {
