@@ -8,6 +8,8 @@
 
 #include "bench_common.h"
 #include "tofcam/filters/filter_set.h"
+#include "tofcam/filters/spatial_filter.h"
+#include "tofcam/filters/uncertainty.h"
 
 namespace {
 
@@ -116,5 +118,38 @@ BENCHMARK(BM_ApplyAllButCells)->Apply(Resolutions);
 // The paper's filters only (defaults: accuracy threshold + saturation).
 void BM_ApplyDefaultFilters(benchmark::State& s) { Run(s, FilterSetOptions{}); }
 BENCHMARK(BM_ApplyDefaultFilters)->Apply(Resolutions);
+
+// Stages after the filters (not in the paper): edge-preserving smoothing of the distances and
+// the combined uncertainty (issue 18), on the same frames.
+void RunSmoothing(benchmark::State& state, tofcam::SpatialFilterKind kind) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  tofcam::SpatialFilterOptions o;
+  o.kind = kind;
+  Image<float> out;
+  std::size_t i = 0;
+  for (auto _ : state) {
+    tofcam::SpatialFilterInto(in.ready[i++ % in.ready.size()], o, out);
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  tofcam::bench::SetPixels(state);
+}
+void BM_SmoothingMedian(benchmark::State& s) { RunSmoothing(s, tofcam::SpatialFilterKind::kMedian); }
+BENCHMARK(BM_SmoothingMedian)->Apply(Resolutions);
+void BM_SmoothingBilateral(benchmark::State& s) {
+  RunSmoothing(s, tofcam::SpatialFilterKind::kBilateral);
+}
+BENCHMARK(BM_SmoothingBilateral)->Apply(Resolutions);
+
+void BM_Uncertainty(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  std::size_t i = 0;
+  for (auto _ : state) {
+    Image<PixelFlags> out = tofcam::UncertaintyFilter(in.ready[i++ % in.ready.size()], {});
+    benchmark::DoNotOptimize(out.data());
+  }
+  tofcam::bench::SetPixels(state);
+}
+BENCHMARK(BM_Uncertainty)->Apply(Resolutions);
 
 }  // namespace

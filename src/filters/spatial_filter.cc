@@ -3,10 +3,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "hot_loop.h"
+#include "simd.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -20,35 +24,57 @@ bool Usable(const MetricFrame& f, std::size_t i) {
   return std::isfinite(f.radial_distance_m[i]) && (f.flags.empty() || f.flags[i].Valid());
 }
 
-inline void Sort2(float& a, float& b) {
-  const float lo = a < b ? a : b;
-  b = a < b ? b : a;
+// One exchange of a sorting network, lane-wise: the smaller value to `a`.
+[[gnu::always_inline]] inline void Sort2(simd::F8& a, simd::F8& b) {
+  const simd::I8 lt = a < b;
+  const simd::F8 lo = lt ? a : b;
+  b = lt ? b : a;
   a = lo;
 }
 
-// Median of nine by the 19-exchange network (Paeth / Devillard's opt_med9): no branches on the
-// data, so it stays fast when the support is complete, which it is for most pixels.
-float Median9(float p[9]) {
-  Sort2(p[1], p[2]);
-  Sort2(p[4], p[5]);
-  Sort2(p[7], p[8]);
-  Sort2(p[0], p[1]);
-  Sort2(p[3], p[4]);
-  Sort2(p[6], p[7]);
-  Sort2(p[1], p[2]);
-  Sort2(p[4], p[5]);
-  Sort2(p[7], p[8]);
-  Sort2(p[0], p[3]);
-  Sort2(p[5], p[8]);
-  Sort2(p[4], p[7]);
-  Sort2(p[3], p[6]);
-  Sort2(p[1], p[4]);
-  Sort2(p[2], p[5]);
-  Sort2(p[4], p[7]);
-  Sort2(p[4], p[2]);
-  Sort2(p[6], p[4]);
-  Sort2(p[4], p[2]);
-  return p[4];
+// 3x3 medians of one interior row for columns 1 .. 8k (the rest is left to the per-pixel path;
+// returns the first column not done). `u`: the usable distances at the row's column 0, NaN where
+// not usable, rows above and below at -+w. Per pixel, as the per-pixel path: nothing when the
+// centre is not usable; the support is the usable neighbours within `limit` of the centre; with
+// n >= min_support of them the result is their (n - 1) / 2-th smallest value. Branch-free:
+// values outside the support become +inf, all nine are sorted by a 25-exchange network (0-1
+// principle: checked on all 512 binary inputs), and the sorted value at (n - 1) / 2 is taken.
+TOFCAM_HOT_LOOP int MedianRow(int w, float limit, int min_support, const float* __restrict u,
+                              float* __restrict out) {
+  using namespace simd;
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  int col = 1;
+  for (; col + 8 <= w - 1; col += 8) {
+    F8 p[9];
+    for (int y = -1; y <= 1; ++y) {
+      for (int x = -1; x <= 1; ++x) p[(y + 1) * 3 + x + 1] = LoadF8(u + y * w + col + x);
+    }
+    const F8 centre = p[4];
+    I8 n = I8{};
+    for (F8& v : p) {
+      const F8 diff = v - centre;
+      const I8 in = (diff < 0.0f ? -diff : diff) <= limit;  // false for NaN
+      v = in ? v : F8{} + kInf;
+      n -= in;
+    }
+    // Written out so that p stays in registers (a loop over a table of pairs kept it in memory).
+    Sort2(p[0], p[3]); Sort2(p[1], p[7]); Sort2(p[2], p[5]); Sort2(p[4], p[8]);
+    Sort2(p[0], p[7]); Sort2(p[2], p[4]); Sort2(p[3], p[8]); Sort2(p[5], p[6]);
+    Sort2(p[0], p[2]); Sort2(p[1], p[3]); Sort2(p[4], p[5]); Sort2(p[7], p[8]);
+    Sort2(p[1], p[4]); Sort2(p[3], p[6]); Sort2(p[5], p[7]);
+    Sort2(p[0], p[1]); Sort2(p[2], p[4]); Sort2(p[3], p[5]); Sort2(p[6], p[8]);
+    Sort2(p[2], p[3]); Sort2(p[4], p[5]); Sort2(p[6], p[7]);
+    Sort2(p[1], p[2]); Sort2(p[3], p[4]); Sort2(p[5], p[6]);
+    const I8 k = (n - 1) >> 1;  // 0..4
+    F8 median = p[0];
+    for (int j = 1; j <= 4; ++j) median = k == j ? p[j] : median;
+    // A usable centre is in its own support (n >= 1).
+    const I8 apply = (centre == centre) & (n >= min_support);
+    const F8 old = LoadF8(out + col);
+    const F8 result = apply ? median : old;
+    std::memcpy(out + col, &result, sizeof result);
+  }
+  return col;
 }
 
 }  // namespace
@@ -115,30 +141,22 @@ void SpatialFilterInto(const MetricFrame& frame, const SpatialFilterOptions& opt
     usable[i] = Usable(frame, i) ? d[i] : std::numeric_limits<float>::quiet_NaN();
   }
   std::array<float, 49> support{};
+  // The support test in single precision, |d_n - d| <= limit, in both paths.
   const float flimit = static_cast<float>(limit);
   for (int row = 0; row < h; ++row) {
+    // Columns [1, vector_end) of an interior row are done by MedianRow (3x3 median only).
+    int vector_end = 1;
+    if (options.kind == SpatialFilterKind::kMedian && r == 1 && row > 0 && row + 1 < h) {
+      const std::size_t c0 = static_cast<std::size_t>(row) * w;
+      vector_end = MedianRow(w, flimit, options.min_support, usable.data() + c0,
+                             distance_out.data() + c0);
+    }
     for (int col = 0; col < w; ++col) {
+      if (col == 1 && vector_end > 1) col = vector_end;
+      if (col >= w) break;
       const std::size_t c = static_cast<std::size_t>(row) * w + col;
       const float fc = usable[c];
       if (!(fc == fc)) continue;  // NaN: not usable
-      if (options.kind == SpatialFilterKind::kMedian && r == 1 && row > 0 && row + 1 < h &&
-          col > 0 && col + 1 < w) {
-        // Interior 3x3: when all nine are usable and within the limit, the network.
-        float p[9];
-        bool all = true;
-        for (int y = -1; y <= 1; ++y) {
-          const float* q = usable.data() + (c + static_cast<std::ptrdiff_t>(y) * w) - 1;
-          for (int x = 0; x < 3; ++x) {
-            const float v = q[x];
-            all &= std::abs(v - fc) <= flimit;  // false for NaN
-            p[(y + 1) * 3 + x] = v;
-          }
-        }
-        if (all) {
-          distance_out[c] = Median9(p);
-          continue;
-        }
-      }
       const double dc = fc;
       const double sc = sigma_at(c);
       const double inv_two_range2 = 1.0 / (2.0 * std::pow(options.range_sigma_factor * sc, 2));
@@ -149,8 +167,8 @@ void SpatialFilterInto(const MetricFrame& frame, const SpatialFilterOptions& opt
           const std::size_t i = static_cast<std::size_t>(y) * w + x;
           const float un = usable[i];
           if (!(un == un)) continue;
+          if (!(std::abs(un - fc) <= flimit)) continue;
           const double dn = un;
-          if (std::abs(dn - dc) > limit) continue;
           support[static_cast<std::size_t>(n++)] = static_cast<float>(dn);
           if (options.kind == SpatialFilterKind::kBilateral) {
             const double sn = sigma_at(i);

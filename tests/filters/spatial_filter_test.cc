@@ -2,8 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <random>
+#include <vector>
 
 #include "tofcam/core/error.h"
 
@@ -110,6 +114,71 @@ TEST(SpatialFilterTest, NoiseShrinksAsTheOrderStatisticsPredict) {
   o.range_sigma_factor = 100.0;  // range weights ~1: the plain mean of 9 (correlated neighbours
                                  // do not matter for the per-pixel σ)
   EXPECT_NEAR(sd(SpatialFilter(f, o)) / 0.01, 1.0 / 3.0, 0.02);
+}
+
+// The 3x3 median by its definition, pixel by pixel: the support is every usable pixel of the
+// window (finite, no reject flag) within max_jump_m of the centre (compared in single
+// precision, as documented); with at least min_support of them the result is the sorted
+// support's element (n - 1) / 2. Every size, window position and support pattern the frames
+// below produce must give the same bits as the filter (whose interior rows run eight pixels at
+// a time through a sorting network).
+TEST(SpatialFilterTest, MedianEqualsTheSortedSupportForEverySizeAndPattern) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  int checked = 0, smoothed = 0;
+  for (const auto& [w, h] : std::vector<std::pair<int, int>>{
+           {1, 1}, {3, 3}, {9, 4}, {10, 5}, {17, 6}, {26, 3}, {31, 7}, {160, 12}}) {
+    for (const auto& [jump, min_support] : std::vector<std::pair<double, int>>{
+             {0.1, 3}, {0.0, 1}, {0.25, 9}, {0.1, 5}}) {
+      MetricFrame f = Frame(w, h, 0.0f);
+      for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+        // Three surfaces 0.5 m apart with 0.125 m steps (exact in binary: ties, and differences
+        // exactly at the 0.25 m limit), holes, rejected and inf pixels.
+        const float surface = 1.0f + 0.5f * static_cast<float>(static_cast<int>(u(rng) * 3));
+        f.radial_distance_m[i] = surface + 0.125f * static_cast<float>(static_cast<int>(u(rng) * 3));
+        const float roll = u(rng);
+        if (roll < 0.05f) f.radial_distance_m[i] = std::numeric_limits<float>::quiet_NaN();
+        if (roll > 0.97f) f.radial_distance_m[i] = std::numeric_limits<float>::infinity();
+        if (roll > 0.05f && roll < 0.12f) f.flags[i] = PixelFlags(Flag::kSaturated);
+      }
+      SpatialFilterOptions o = Median(jump);
+      o.min_support = min_support;
+      const MetricFrame out = SpatialFilter(f, o);
+      const float limit =
+          jump > 0.0 ? static_cast<float>(jump) : std::numeric_limits<float>::infinity();
+      auto usable = [&](int r, int c) {
+        const float v = f.radial_distance_m(r, c);
+        return std::isfinite(v) && f.flags(r, c).Valid();
+      };
+      for (int r = 0; r < h; ++r) {
+        for (int c = 0; c < w; ++c) {
+          float expected = f.radial_distance_m(r, c);
+          if (usable(r, c)) {
+            std::vector<float> support;
+            for (int y = std::max(0, r - 1); y <= std::min(h - 1, r + 1); ++y) {
+              for (int x = std::max(0, c - 1); x <= std::min(w - 1, c + 1); ++x) {
+                if (usable(y, x) &&
+                    std::abs(f.radial_distance_m(y, x) - f.radial_distance_m(r, c)) <= limit) {
+                  support.push_back(f.radial_distance_m(y, x));
+                }
+              }
+            }
+            if (static_cast<int>(support.size()) >= min_support) {
+              std::sort(support.begin(), support.end());
+              expected = support[(support.size() - 1) / 2];
+              smoothed += expected != f.radial_distance_m(r, c);
+            }
+          }
+          const float got = out.radial_distance_m(r, c);
+          ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0)
+              << w << "x" << h << " jump " << jump << " min " << min_support << " at (" << r
+              << ", " << c << "): " << got << " vs " << expected;
+          ++checked;
+        }
+      }
+    }
+  }
+  EXPECT_GT(smoothed, checked / 10);  // the frames exercise the median, not only copies
 }
 
 TEST(SpatialFilterTest, BadOptionsAndSizes) {
