@@ -134,7 +134,9 @@ void RunSmoothing(benchmark::State& state, tofcam::SpatialFilterKind kind) {
   }
   tofcam::bench::SetPixels(state);
 }
-void BM_SmoothingMedian(benchmark::State& s) { RunSmoothing(s, tofcam::SpatialFilterKind::kMedian); }
+void BM_SmoothingMedian(benchmark::State& s) {
+  RunSmoothing(s, tofcam::SpatialFilterKind::kMedian);
+}
 BENCHMARK(BM_SmoothingMedian)->Apply(Resolutions);
 void BM_SmoothingBilateral(benchmark::State& s) {
   RunSmoothing(s, tofcam::SpatialFilterKind::kBilateral);

@@ -58,13 +58,31 @@ TOFCAM_HOT_LOOP int MedianRow(int w, float limit, int min_support, const float* 
       n -= in;
     }
     // Written out so that p stays in registers (a loop over a table of pairs kept it in memory).
-    Sort2(p[0], p[3]); Sort2(p[1], p[7]); Sort2(p[2], p[5]); Sort2(p[4], p[8]);
-    Sort2(p[0], p[7]); Sort2(p[2], p[4]); Sort2(p[3], p[8]); Sort2(p[5], p[6]);
-    Sort2(p[0], p[2]); Sort2(p[1], p[3]); Sort2(p[4], p[5]); Sort2(p[7], p[8]);
-    Sort2(p[1], p[4]); Sort2(p[3], p[6]); Sort2(p[5], p[7]);
-    Sort2(p[0], p[1]); Sort2(p[2], p[4]); Sort2(p[3], p[5]); Sort2(p[6], p[8]);
-    Sort2(p[2], p[3]); Sort2(p[4], p[5]); Sort2(p[6], p[7]);
-    Sort2(p[1], p[2]); Sort2(p[3], p[4]); Sort2(p[5], p[6]);
+    Sort2(p[0], p[3]);
+    Sort2(p[1], p[7]);
+    Sort2(p[2], p[5]);
+    Sort2(p[4], p[8]);
+    Sort2(p[0], p[7]);
+    Sort2(p[2], p[4]);
+    Sort2(p[3], p[8]);
+    Sort2(p[5], p[6]);
+    Sort2(p[0], p[2]);
+    Sort2(p[1], p[3]);
+    Sort2(p[4], p[5]);
+    Sort2(p[7], p[8]);
+    Sort2(p[1], p[4]);
+    Sort2(p[3], p[6]);
+    Sort2(p[5], p[7]);
+    Sort2(p[0], p[1]);
+    Sort2(p[2], p[4]);
+    Sort2(p[3], p[5]);
+    Sort2(p[6], p[8]);
+    Sort2(p[2], p[3]);
+    Sort2(p[4], p[5]);
+    Sort2(p[6], p[7]);
+    Sort2(p[1], p[2]);
+    Sort2(p[3], p[4]);
+    Sort2(p[5], p[6]);
     const I8 k = (n - 1) >> 1;  // 0..4
     F8 median = p[0];
     for (int j = 1; j <= 4; ++j) median = k == j ? p[j] : median;
@@ -148,8 +166,8 @@ void SpatialFilterInto(const MetricFrame& frame, const SpatialFilterOptions& opt
     int vector_end = 1;
     if (options.kind == SpatialFilterKind::kMedian && r == 1 && row > 0 && row + 1 < h) {
       const std::size_t c0 = static_cast<std::size_t>(row) * w;
-      vector_end = MedianRow(w, flimit, options.min_support, usable.data() + c0,
-                             distance_out.data() + c0);
+      vector_end =
+          MedianRow(w, flimit, options.min_support, usable.data() + c0, distance_out.data() + c0);
     }
     for (int col = 0; col < w; ++col) {
       if (col == 1 && vector_end > 1) col = vector_end;

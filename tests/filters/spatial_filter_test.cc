@@ -128,14 +128,15 @@ TEST(SpatialFilterTest, MedianEqualsTheSortedSupportForEverySizeAndPattern) {
   int checked = 0, smoothed = 0;
   for (const auto& [w, h] : std::vector<std::pair<int, int>>{
            {1, 1}, {3, 3}, {9, 4}, {10, 5}, {17, 6}, {26, 3}, {31, 7}, {160, 12}}) {
-    for (const auto& [jump, min_support] : std::vector<std::pair<double, int>>{
-             {0.1, 3}, {0.0, 1}, {0.25, 9}, {0.1, 5}}) {
+    for (const auto& [jump, min_support] :
+         std::vector<std::pair<double, int>>{{0.1, 3}, {0.0, 1}, {0.25, 9}, {0.1, 5}}) {
       MetricFrame f = Frame(w, h, 0.0f);
       for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
         // Three surfaces 0.5 m apart with 0.125 m steps (exact in binary: ties, and differences
         // exactly at the 0.25 m limit), holes, rejected and inf pixels.
         const float surface = 1.0f + 0.5f * static_cast<float>(static_cast<int>(u(rng) * 3));
-        f.radial_distance_m[i] = surface + 0.125f * static_cast<float>(static_cast<int>(u(rng) * 3));
+        f.radial_distance_m[i] =
+            surface + 0.125f * static_cast<float>(static_cast<int>(u(rng) * 3));
         const float roll = u(rng);
         if (roll < 0.05f) f.radial_distance_m[i] = std::numeric_limits<float>::quiet_NaN();
         if (roll > 0.97f) f.radial_distance_m[i] = std::numeric_limits<float>::infinity();
@@ -171,8 +172,8 @@ TEST(SpatialFilterTest, MedianEqualsTheSortedSupportForEverySizeAndPattern) {
           }
           const float got = out.radial_distance_m(r, c);
           ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0)
-              << w << "x" << h << " jump " << jump << " min " << min_support << " at (" << r
-              << ", " << c << "): " << got << " vs " << expected;
+              << w << "x" << h << " jump " << jump << " min " << min_support << " at (" << r << ", "
+              << c << "): " << got << " vs " << expected;
           ++checked;
         }
       }
