@@ -5,12 +5,73 @@
 #include <limits>
 #include <string>
 
+#include "hot_loop.h"
+#include "simd.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
 namespace {
 
 [[noreturn]] void Bad(const std::string& what) { throw Error(ErrorCode::kInvalidArgument, what); }
+
+// One row of the default uncertainty (no extrapolated edges) from padded rows (index -1 and w
+// exist): `d` the usable distances (NaN where not usable or outside the image), `s` ΔL, `unknown`
+// 1 where the pixel carries one of the unknown-neighbour flags; `du`, `dd` (`su`, `sd`, `ku`,
+// `kd`) the rows above and below. The same double operations in the same order as the per-pixel
+// form in ComputeUncertainty, four pixels per step (max of non-negative finite values is exact
+// in any order): u = sqrt(s² + edge²), +inf for an unusable centre or an unknown neighbour.
+TOFCAM_HOT_LOOP void UncertaintyRow(int w, double min_jump_sigma, double edge_fraction,
+                                    const float* __restrict d, const float* __restrict s,
+                                    const std::uint8_t* __restrict unknown,
+                                    const float* __restrict du, const float* __restrict su,
+                                    const std::uint8_t* __restrict ku, const float* __restrict dd,
+                                    const float* __restrict sd, const std::uint8_t* __restrict kd,
+                                    float* __restrict out) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (int c = 0; c < w; ++c) {
+    const double dc = d[c], sc = s[c];
+    double edge = 0.0;
+    // Neighbours up, down, left, right.
+    const double dn[4] = {du[c], dd[c], d[c - 1], d[c + 1]};
+    const double sn[4] = {su[c], sd[c], s[c - 1], s[c + 1]};
+    for (int k = 0; k < 4; ++k) {
+      const double step = std::abs(dn[k] - dc);
+      // False for a NaN (unusable) neighbour.
+      const bool edge_step = step > min_jump_sigma * std::sqrt(sc * sc + sn[k] * sn[k]);
+      edge = std::max(edge, edge_step ? edge_fraction * step : 0.0);
+    }
+    const bool unbounded = (ku[c] | kd[c] | unknown[c - 1] | unknown[c + 1]) != 0;
+    const float u = static_cast<float>(std::sqrt(sc * sc + edge * edge));
+    out[c] = (dc == dc) && !unbounded ? u : kInf;
+  }
+}
+
+// One row of the padded inputs of UncertaintyRow: the distance where the pixel is usable (no
+// reject flag, finite distance and ΔL; NaN otherwise), ΔL, and the unknown-neighbour mask.
+TOFCAM_HOT_LOOP void PadRow(int w, const float* __restrict d, const float* __restrict s,
+                            const PixelFlags* __restrict flags, std::uint16_t unknown_flags,
+                            float* __restrict pd, float* __restrict ps,
+                            std::uint8_t* __restrict pk) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (int c = 0; c < w; ++c) {
+    const bool usable = ((flags[c].bits() & kRejectMask) == 0) & (std::abs(d[c]) < kInf) &
+                        (std::abs(s[c]) < kInf);  // false for NaN and inf
+    pd[c] = usable ? d[c] : std::numeric_limits<float>::quiet_NaN();
+    ps[c] = s[c];
+    pk[c] = static_cast<std::uint8_t>((flags[c].bits() & unknown_flags) != 0);
+  }
+}
+
+// kLowConfidence where a pixel without a reject flag has u above `max` (or u NaN).
+TOFCAM_HOT_LOOP void FlagRow(std::size_t n, const float* __restrict u,
+                             const PixelFlags* __restrict flags, float max,
+                             PixelFlags* __restrict out) {
+  const auto bit = static_cast<std::uint16_t>(Flag::kLowConfidence);
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool low = ((flags[i].bits() & kRejectMask) == 0) & !(u[i] <= max);
+    out[i] = PixelFlags(static_cast<std::uint16_t>(low ? bit : 0));
+  }
+}
 
 }  // namespace
 
@@ -54,6 +115,28 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     return dev > options.min_jump_sigma * std::sqrt(si * si + 4 * sa * sa + sb * sb) ? dev : 0.0;
   };
   Image<float> out(w, h, kInf);
+  if (!options.extrapolate_edges) {
+    // Padded rows (one pixel each side; rows outside the image all padding): distances NaN
+    // where not usable, ΔL, and the unknown-neighbour mask.
+    const std::size_t pw = static_cast<std::size_t>(w) + 2;
+    thread_local std::vector<float> pd, ps;
+    thread_local std::vector<std::uint8_t> pk;
+    const std::size_t rows = static_cast<std::size_t>(h) + 2;
+    pd.assign(rows * pw, std::numeric_limits<float>::quiet_NaN());
+    ps.assign(rows * pw, 0.0f);
+    pk.assign(rows * pw, 0);
+    for (int r = 0; r < h; ++r) {
+      const std::size_t o = (static_cast<std::size_t>(r) + 1) * pw + 1;
+      PadRow(w, frame.radial_distance_m.Row(r).data(), frame.delta_l_m.Row(r).data(),
+             frame.flags.Row(r).data(), options.unknown_neighbour_flags, &pd[o], &ps[o], &pk[o]);
+    }
+    for (int r = 0; r < h; ++r) {
+      const std::size_t up = static_cast<std::size_t>(r) * pw + 1, mid = up + pw, down = mid + pw;
+      UncertaintyRow(w, options.min_jump_sigma, options.edge_fraction, &pd[mid], &ps[mid], &pk[mid],
+                     &pd[up], &ps[up], &pk[up], &pd[down], &ps[down], &pk[down], out.Row(r).data());
+    }
+    return out;
+  }
   for (int r = 0; r < h; ++r) {
     for (int c = 0; c < w; ++c) {
       const std::size_t i = static_cast<std::size_t>(r) * w + c;
@@ -93,14 +176,10 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
 Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame, const UncertaintyOptions& options) {
   const Image<float> u = ComputeUncertainty(frame, options);
   Image<PixelFlags> out(frame.width(), frame.height());
-  const float max = static_cast<float>(options.max_uncertainty_m);
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    // Rejected pixels (u = inf) already carry their reason; the others are judged (u = inf
-    // there: next to a clipped pixel, or no ΔL).
-    if (!frame.flags[i].Any(kRejectMask) && !(u[i] <= max)) {
-      out[i] = PixelFlags(Flag::kLowConfidence);
-    }
-  }
+  // Rejected pixels (u = inf) already carry their reason; the others are judged (u = inf
+  // there: next to a clipped pixel, or no ΔL).
+  FlagRow(u.size(), u.data(), frame.flags.data(), static_cast<float>(options.max_uncertainty_m),
+          out.data());
   return out;
 }
 

@@ -3,6 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <vector>
 
 #include "tofcam/core/error.h"
 
@@ -123,6 +127,78 @@ TEST(Uncertainty, NextToAClippedPixelTheJumpIsUnbounded) {
   EXPECT_NEAR(ComputeUncertainty(m, off)[0], 0.01, 1e-7);
   m.flags[1] = PixelFlags(Flag::kInconsistent);
   EXPECT_TRUE(std::isinf(ComputeUncertainty(m, on)[0]));
+}
+
+// The file comment's definition, pixel by pixel, against the filter's rows on random frames:
+// surfaces with steps, noise-sized and edge-sized; NaN, inf and rejected pixels; missing ΔL; a
+// clipped (unknown) neighbour; every size from one pixel up, so that no row length, border or
+// image edge is special. The same double formula, so the same bits.
+TEST(Uncertainty, RowsEqualTheDefinitionForEverySizeAndPattern) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  int finite = 0, edges = 0;
+  for (const auto& [w, h] :
+       std::vector<std::pair<int, int>>{{1, 1}, {2, 3}, {5, 1}, {7, 6}, {16, 4}, {37, 9}}) {
+    MetricFrame m;
+    m.radial_distance_m = Image<float>(w, h);
+    m.amplitude = Image<float>(w, h, 1000.0f);
+    m.flags = Image<PixelFlags>(w, h);
+    m.delta_l_m = Image<float>(w, h);
+    for (std::size_t i = 0; i < m.flags.size(); ++i) {
+      m.radial_distance_m[i] =
+          1.0f + 0.5f * static_cast<float>(static_cast<int>(u(rng) * 3)) + 0.01f * u(rng);
+      m.delta_l_m[i] = 0.002f + 0.02f * u(rng);
+      const float roll = u(rng);
+      if (roll < 0.04f) m.radial_distance_m[i] = std::numeric_limits<float>::quiet_NaN();
+      if (roll > 0.04f && roll < 0.07f) m.radial_distance_m[i] = kInf;
+      if (roll > 0.07f && roll < 0.10f) m.delta_l_m[i] = std::numeric_limits<float>::quiet_NaN();
+      if (roll > 0.10f && roll < 0.15f) m.flags[i] = PixelFlags(Flag::kLowAmplitude);
+      if (roll > 0.15f && roll < 0.18f) m.flags[i] = PixelFlags(Flag::kSaturated);
+    }
+    UncertaintyOptions o;
+    o.unknown_neighbour_flags = static_cast<std::uint16_t>(Flag::kSaturated);
+    const Image<float> got = ComputeUncertainty(m, o);
+    auto usable = [&](int r, int c) {
+      return !m.flags(r, c).Any(kRejectMask) && std::isfinite(m.radial_distance_m(r, c)) &&
+             std::isfinite(m.delta_l_m(r, c));
+    };
+    for (int r = 0; r < h; ++r) {
+      for (int c = 0; c < w; ++c) {
+        float expected = kInf;
+        if (usable(r, c)) {
+          const double d = m.radial_distance_m(r, c), s = m.delta_l_m(r, c);
+          double jump = 0.0;
+          bool unknown = false;
+          for (const auto& [dr, dc] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
+            const int rr = r + dr, cc = c + dc;
+            if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
+            unknown |= m.flags(rr, cc).Any(o.unknown_neighbour_flags);
+            if (!usable(rr, cc)) continue;
+            const double step = std::abs(static_cast<double>(m.radial_distance_m(rr, cc)) - d);
+            const double sj = m.delta_l_m(rr, cc);
+            if (step > o.min_jump_sigma * std::sqrt(s * s + sj * sj)) jump = std::max(jump, step);
+          }
+          const double edge = o.edge_fraction * jump;
+          if (!unknown) expected = static_cast<float>(std::sqrt(s * s + edge * edge));
+          finite += !unknown;
+          edges += !unknown && jump > 0.0;
+        }
+        ASSERT_EQ(std::memcmp(&got(r, c), &expected, sizeof expected), 0)
+            << w << "x" << h << " at (" << r << ", " << c << "): " << got(r, c) << " vs "
+            << expected;
+      }
+    }
+    // The filter flags exactly the usable pixels above the threshold (and those next to a
+    // clipped one).
+    const Image<PixelFlags> flags = UncertaintyFilter(m, o);
+    for (std::size_t i = 0; i < flags.size(); ++i) {
+      const bool low = !m.flags[i].Any(kRejectMask) && !(got[i] <= o.max_uncertainty_m);
+      EXPECT_EQ(flags[i].Has(Flag::kLowConfidence), low) << i;
+    }
+  }
+  EXPECT_GT(finite, 100);
+  EXPECT_GT(edges, 30);
 }
 
 TEST(Uncertainty, BadInputIsAClearError) {
