@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numeric>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tofcam/core/error.h"
@@ -212,9 +213,11 @@ bool FramePairCombiner::Process(MetricFrame& frame) {
     previous_ = frame;
     return false;
   }
-  MetricFrame incoming = frame;
+  // The frame as it came in becomes the next previous one. Copied into buffers kept from frame
+  // to frame (copy assignment reuses their capacity) instead of a fresh frame each time.
+  spare_ = frame;
   CombineFramePair(*previous_, frame, options_);
-  previous_ = std::move(incoming);
+  std::swap(*previous_, spare_);
   return true;
 }
 

@@ -98,6 +98,7 @@ class FramePairCombiner {
  private:
   FramePairOptions options_;
   std::optional<MetricFrame> previous_;  // the last frame as it came in (before combining)
+  MetricFrame spare_;  // the incoming frame's copy; swapped with previous_, so no allocation
 };
 
 struct WrapCheckOptions {
