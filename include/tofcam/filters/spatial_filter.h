@@ -6,9 +6,11 @@
 /// Only pixels without a reject bit (kRejectMask) and with a finite distance take part, as
 /// centre or as support; rejected pixels are copied unchanged. The support of a pixel with
 /// distance d is every usable pixel of its (2 r + 1)^2 window whose distance is within
-/// max_jump_m of d (0 = no limit): across a depth step the two surfaces are never mixed, so the
-/// filter neither creates flying pixels nor rounds edges.
-///  - kMedian: the median of the support (the lower middle value for an even count).
+/// max_jump_m of d (|d_n - d| <= max_jump_m in single precision; 0 = no limit): across a depth
+/// step the two surfaces are never mixed, so the filter neither creates flying pixels nor rounds
+/// edges.
+///  - kMedian: the median of the support (the lower middle value for an even count). The 3x3
+///    median of interior rows runs eight pixels at a time through a sorting network (same values).
 ///  - kBilateral: the mean of the support weighted by exp(-(d_n - d)^2 / (2 (k σ)^2)) / σ_n^2,
 ///    σ_n the neighbour's predicted σ (ΔL, m) and σ the centre's, k = range_sigma_factor: a
 ///    noisy neighbour counts less, and one further than a few σ from d hardly at all. Without
