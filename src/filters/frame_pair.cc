@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "hot_loop.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -25,6 +26,39 @@ bool Good(const MetricFrame& f, std::size_t i) {
 double Weight(float delta_l) {
   return std::isfinite(delta_l) && delta_l > 0.0f ? 1.0 / (static_cast<double>(delta_l) * delta_l)
                                                   : 0.0;
+}
+
+// The wrap-count search of two frequencies for pixels [0, n): for each count n1 = 0..max_n1 of
+// the first frame's wrap, the second's nearest count n2 >= 0, and of these pairs the one whose
+// unwrapped distances disagree least (a, b) and the second-least disagreement. Pixel by pixel the
+// same operations in the same order as a loop over n1 per pixel; the loops are turned so that
+// each pass over n1 runs across pixels (vectorised, rounding inline in the AVX2 clone). `best`:
+// scratch of n values.
+TOFCAM_HOT_LOOP void WrapSearch(std::size_t n, const float* __restrict d1s,
+                                const float* __restrict d2s, double l1, double l2, int max_n1,
+                                double* __restrict a, double* __restrict b, double* __restrict best,
+                                double* __restrict second) {
+  for (std::size_t i = 0; i < n; ++i) {
+    a[i] = d1s[i];
+    b[i] = d2s[i];
+    best[i] = 1e300;
+    second[i] = 1e300;
+  }
+  for (int n1 = 0; n1 <= max_n1; ++n1) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const double d1 = d1s[i], d2 = d2s[i];
+      const double e1 = d1 + n1 * l1;
+      const double n2 = std::max(0.0, std::round((e1 - d2) / l2));
+      const double e2 = d2 + n2 * l2;
+      const double disagreement = std::abs(e1 - e2);
+      const bool better = disagreement < best[i];
+      const bool second_better = !better && disagreement < second[i];
+      second[i] = better ? best[i] : (second_better ? disagreement : second[i]);
+      best[i] = better ? disagreement : best[i];
+      a[i] = better ? e1 : a[i];
+      b[i] = better ? e2 : b[i];
+    }
+  }
 }
 
 }  // namespace
@@ -120,7 +154,22 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
   const double log_floor = std::log1p(options.min_amplitude_tolerance);
   // Within half the wrap separation a motion's own pair is the only one that close.
   const double motion_bound = std::min(options.max_motion_m, 0.5 * std::abs(l1 - l2));
+  // Two frequencies: the wrap search for blocks of pixels at a time (its scratch stays in cache).
+  constexpr std::size_t kBlock = 1024;
+  thread_local std::vector<double> search;
+  search.resize(4 * kBlock);
+  double* const search_a = search.data();
+  double* const search_b = search_a + kBlock;
+  double* const search_best = search_b + kBlock;
+  double* const search_second = search_best + kBlock;
+  std::size_t block_start = 0;
   for (std::size_t i = 0; i < n; ++i) {
+    if (dual && i % kBlock == 0) {
+      block_start = i;
+      WrapSearch(std::min(kBlock, n - i), previous.radial_distance_m.data() + i,
+                 current.radial_distance_m.data() + i, l1, l2, max_n1, search_a, search_b,
+                 search_best, search_second);
+    }
     const bool ok1 = Good(previous, i), ok2 = Good(current, i);
     if (!ok1 && !ok2) continue;
     if (!ok1 || !ok2) {
@@ -146,21 +195,10 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
     bool ambiguous = false;
     double second = 1e300;  // the second-best pair's disagreement (two frequencies)
     if (dual) {
-      double best = 1e300;
-      for (int n1 = 0; n1 <= max_n1; ++n1) {
-        const double e1 = d1 + n1 * l1;
-        const double n2 = std::max(0.0, std::round((e1 - d2) / l2));
-        const double e2 = d2 + n2 * l2;
-        const double disagreement = std::abs(e1 - e2);
-        if (disagreement < best) {
-          second = best;
-          best = disagreement;
-          a = e1;
-          b = e2;
-        } else if (disagreement < second) {
-          second = disagreement;
-        }
-      }
+      const std::size_t k = i - block_start;
+      a = search_a[k];
+      b = search_b[k];
+      second = search_second[k];
       ambiguous = second <= tolerance;
     } else {
       a = d1 - l1 * std::round((d1 - d2) / l1);  // the same surface near the 0 / L seam

@@ -38,6 +38,35 @@ TEST(FramePair, DualFrequencyUnwrapsBeyondBothRanges) {
   EXPECT_FALSE(b.flags[0].Any(kRejectMask));
 }
 
+TEST(FramePair, UnwrapsEveryPixelOfALongFrame) {
+  // 3000 pixels (the wrap search runs in blocks of pixels: several full ones and a partial one)
+  // on a ramp from 0.5 m to 29.5 m, through every pair of wrap counts within the 30 m range:
+  // each must read its own distance, none flagged.
+  constexpr int kN = 3000;
+  MetricFrame a, b;
+  for (MetricFrame* m : {&a, &b}) {
+    m->radial_distance_m = Image<float>(kN, 1);
+    m->amplitude = Image<float>(kN, 1, 1000.0f);
+    m->flags = Image<PixelFlags>(kN, 1);
+    m->delta_l_m = Image<float>(kN, 1, 0.001f);
+    m->info.integration_time_register = 10;
+  }
+  a.info.modulation_frequency_hz = 20e6;
+  b.info.modulation_frequency_hz = 17e6;
+  const double la = UnambiguousRangeM(20e6), lb = UnambiguousRangeM(17e6);
+  for (int i = 0; i < kN; ++i) {
+    const double d = 0.5 + 29.0 * i / (kN - 1);
+    a.radial_distance_m[i] = static_cast<float>(std::fmod(d, la));
+    b.radial_distance_m[i] = static_cast<float>(std::fmod(d, lb));
+  }
+  CombineFramePair(a, b);
+  for (int i = 0; i < kN; ++i) {
+    const double d = 0.5 + 29.0 * i / (kN - 1);
+    ASSERT_NEAR(b.radial_distance_m[i], d, 1e-4) << i;
+    ASSERT_FALSE(b.flags[i].Any(kRejectMask)) << i;
+  }
+}
+
 TEST(FramePair, DisagreementBeyondItsSigmaIsInconsistent) {
   // Second pixel moved 0.2 m between the frames; 4 σ of sqrt(2) x 1 cm is 5.7 cm.
   const MetricFrame a = Pixels(20e6, 3.0, 3.0, 0.01f);
