@@ -55,15 +55,17 @@ std::vector<Segment> Between(const std::vector<Segment>& changes, double duratio
 
 // The scene with the hand's moves made steps: each object named "hand ..." that starts a move at
 // a change's start_s (a change lasting longer than a frame) keeps moving as it did before the
-// move (the robot carries it) until 10 ms before the move's end, then jumps to the pose the
-// move ends in, between two frames (30 frames/s: 33 ms apart), instead of moving over 15-30
-// frames. Returns the changes as steps at those times.
-std::vector<Segment> MakeHandMovesSteps(sim::Scene& scene, const std::vector<Segment>& changes) {
-  constexpr double kStepS = 0.01;
+// move (the robot carries it) until `before_end_s` before the move's end, then jumps to the pose
+// the move ends in, instead of moving over 15-30 frames. With before_end_s inside the camera's
+// readout the jump falls between two exposures: frames start every 1/30 s, every move ends on
+// that grid, and integration + readout fit 1/30 s, so no exposure is open during the last
+// readout time before a frame starts. Returns the changes as steps at the jumps' times.
+std::vector<Segment> MakeHandMovesSteps(sim::Scene& scene, const std::vector<Segment>& changes,
+                                        double before_end_s) {
   std::vector<Segment> steps;
   for (const Segment& change : changes) {
-    const bool move = change.end_s - change.start_s > kStepS;
-    const double at = move ? change.end_s - kStepS : change.start_s;
+    const bool move = change.end_s - change.start_s > before_end_s;
+    const double at = move ? change.end_s - before_end_s : change.start_s;
     steps.push_back({at, at});
     if (!move) continue;
     for (sim::SceneObject& object : scene.objects) {
@@ -222,8 +224,10 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
       from_start.push_back({steps[k], k + 1 < steps.size() ? steps[k + 1] : duration_s});
     }
     const auto [settle_text, max_settle] = SettleText(SettleFrames(times, regs, from_start));
-    const auto [settle_end_text, max_settle_end] =
-        SettleText(SettleFrames(times, regs, Between(changes, duration_s)));
+    const std::vector<int> settle_end = SettleFrames(times, regs, Between(changes, duration_s));
+    const auto [settle_end_text, max_settle_end] = SettleText(settle_end);
+    r.metrics[setting.label + ".settle_segments_measured"] = static_cast<double>(
+        std::count_if(settle_end.begin(), settle_end.end(), [](int f) { return f >= 0; }));
     double steady_sum = 0, reachable_sum = 0;
     int steady_n = 0, reachable_n = 0;
     const double target = popts.controller.target_intensity;
@@ -416,6 +420,11 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
     bool steps = false;  // the hand's moves made steps (MakeHandMovesSteps)
   };
   const double sequence_s = 10.0 * std::min(1.0, std::max(o.effort, 0.3));
+  // The step variants' jumps: half the readout before a frame starts (SR-2: 2 ms of 4).
+  const double step_before_end_s = 0.5 * s.model.readout_time_us * 1e-6;
+  if (!(step_before_end_s > 0.0)) {
+    throw Error(ErrorCode::kInternal, "controllers: the camera model has no readout time");
+  }
   const std::vector<Segment> demo_changes = {{1.5, 2.5}, {4.5, 5.5}, {6.0, 6.0}, {8.5, 8.5}};
   const std::vector<OtherScene> scenes = {
       {"demo", "demo", sequence_s, demo_changes},
@@ -436,7 +445,8 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
       popts.controller = setting.controller;
       sim::Scene sim_scene = sim::LoadBuiltinScene(scene_name);
       const std::vector<Segment> timed =
-          steps_only ? MakeHandMovesSteps(sim_scene, scene_changes) : scene_changes;
+          steps_only ? MakeHandMovesSteps(sim_scene, scene_changes, step_before_end_s)
+                     : scene_changes;
       sim::SimulatedCamera camera(std::move(sim_scene), s.model, Sim(o, seed++, 0));
       Pipeline pipeline(popts, camera.Info());
       camera.SetIntegrationTimeRegister(pipeline.InitialIntegrationRegister());
@@ -460,8 +470,10 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
         valid += res.stats.valid_fraction;
         ++frames;
       }
-      const auto [settle_text, max_settle] =
-          SettleText(SettleFrames(times, regs, Between(timed, seconds)));
+      const std::vector<int> settle = SettleFrames(times, regs, Between(timed, seconds));
+      const auto [settle_text, max_settle] = SettleText(settle);
+      r.metrics[scene + "." + setting.label + ".settle_segments_measured"] = static_cast<double>(
+          std::count_if(settle.begin(), settle.end(), [](int f) { return f >= 0; }));
       others.rows.push_back({scene, setting.label, settle_text, I(clipped) + " of " + I(frames),
                              I(longest), Pct(valid / static_cast<double>(frames))});
       r.metrics[scene + "." + setting.label + ".max_settle_frames_after_change"] =
@@ -481,8 +493,9 @@ ExperimentResult Controllers(const ExperimentOptions& o) {
           "truth-saturated pixels; valid: after the pipeline's filters. A settle count of 0 "
           "with many clipped frames is a law that does not move (it holds a clipping "
           "exposure). \"hand steps\": the same sequences with each of the hand's moves made a "
-          "step (it jumps in or out 10 ms before the move would have ended, between two "
-          "frames), settling counted from the step.\n";
+          "step (the hand keeps moving with the robot as before the move, then jumps to the "
+          "pose the move ends in during the readout before the move's last frame, when no "
+          "exposure is open), settling counted from the step.\n";
   r.text = text.str();
   return r;
 }
