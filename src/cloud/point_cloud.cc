@@ -103,7 +103,7 @@ PointCloud MakePointCloud(const MetricFrame& frame, const RayTable& rays,
 
 namespace kernels {
 
-void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud) {
+void CheckCloudInputs(const MetricFrame& frame, const RayTable& rays) {
   const int w = frame.width(), h = frame.height();
   if (frame.radial_distance_m.empty()) {
     throw Error(ErrorCode::kInvalidArgument, "point cloud: empty distance image");
@@ -121,7 +121,11 @@ void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cl
                                           std::to_string(rays.x.height()) + ", the frame " +
                                           std::to_string(w) + "x" + std::to_string(h));
   }
-  cloud.Resize(w, h);  // no-op (no allocation) when the cloud already has this size
+}
+
+void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud) {
+  CheckCloudInputs(frame, rays);
+  cloud.Resize(frame.width(), frame.height());  // no-op (no allocation) at the same size
 }
 
 void CloudSpan(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,

@@ -4,12 +4,15 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <vector>
 
 #include "../core/fast_atan2.h"
 #include "../filters/hot_loop.h"
+#include "../pipeline/stage_kernels.h"
+#include "pan_cells.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/pixel_flags.h"
 #include "tofcam/core/units.h"
@@ -20,150 +23,239 @@ namespace {
 constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 constexpr double kDeg = kPi / 180.0;
 
-using internal::FastAtan2;
-using internal::Sel;
+constexpr float kEps = 0x1p-24f;      // unit roundoff of float
+constexpr std::size_t kChunk = 4096;  // points per pass (~100 KB of scratch)
 
-// Geometry of the panorama for the per-point loop.
-struct Strip {
-  double forward[3], left[3], up[3];
-  double max_azimuth_rad, max_tan_elevation, inv_resolution;
-  int cols, rows;
-};
-
-// Moves n camera-frame points into the base frame (r * p + t, NaN stays NaN) and marks the valid
-// ones (no reject flag, finite coordinates), as TransformPointCloud and PointCloud::IsValid do.
-[[gnu::noinline]] TOFCAM_HOT_LOOP void TransformPoints(
-    std::size_t n, const float* __restrict r, const float* __restrict t, const float* __restrict x,
-    const float* __restrict y, const float* __restrict z, const std::uint16_t* __restrict flags,
+// The camera-frame point d x ray (NaN where `nan_mask` or a non-finite d says so, as
+// MakePointCloud) moved into the base frame (r * p + t, the same float operations as
+// TransformPointCloud), whether it is valid (no reject flag, finite), and its squared distance
+// from the rotation centre in double (each square exact, two roundings): the z-buffer's key.
+[[gnu::noinline]] TOFCAM_HOT_LOOP void BasePoints(
+    std::size_t n, const float* __restrict d, const std::uint16_t* __restrict flags,
+    std::uint16_t nan_mask, const float* __restrict rx, const float* __restrict ry,
+    const float* __restrict rz, const float* __restrict r, const float* __restrict t,
     float* __restrict bx, float* __restrict by, float* __restrict bz,
-    std::uint8_t* __restrict valid) {
+    std::uint8_t* __restrict valid, double* __restrict range2) {
+  constexpr float kMax = std::numeric_limits<float>::max();
   for (std::size_t i = 0; i < n; ++i) {
-    const float px = r[0] * x[i] + r[3] * y[i] + r[6] * z[i] + t[0];
-    const float py = r[1] * x[i] + r[4] * y[i] + r[7] * z[i] + t[1];
-    const float pz = r[2] * x[i] + r[5] * y[i] + r[8] * z[i] + t[2];
+    const bool keep = (static_cast<unsigned>((flags[i] & nan_mask) == 0) &
+                       static_cast<unsigned>(std::abs(d[i]) <= kMax)) != 0;
+    const float di = keep ? d[i] : kNan;
+    const float x = di * rx[i], y = di * ry[i], z = di * rz[i];
+    const float px = r[0] * x + r[3] * y + r[6] * z + t[0];
+    const float py = r[1] * x + r[4] * y + r[7] * z + t[1];
+    const float pz = r[2] * x + r[5] * y + r[8] * z + t[2];
     bx[i] = px;
     by[i] = py;
     bz[i] = pz;
-    // Finite: |v| <= max (false for inf and NaN).
-    const bool finite = (std::abs(px) <= std::numeric_limits<float>::max()) &
-                        (std::abs(py) <= std::numeric_limits<float>::max()) &
-                        (std::abs(pz) <= std::numeric_limits<float>::max());
+    const bool finite = (std::abs(px) <= kMax) & (std::abs(py) <= kMax) & (std::abs(pz) <= kMax);
     valid[i] = static_cast<std::uint8_t>(((flags[i] & kRejectMask) == 0) & finite);
+    const double dx = px, dy = py, dz = pz;
+    range2[i] = dx * dx + dy * dy + dz * dz;
   }
 }
 
-// Per base-frame point: its panorama cell (row * cols + col) or -1 when it is invalid, on the
-// axis or outside the strip, and its distance from the rotation centre.
-[[gnu::noinline]] TOFCAM_HOT_LOOP void CellsOfPoints(
-    std::size_t n, const Strip& s, const float* __restrict bx, const float* __restrict by,
-    const float* __restrict bz, const std::uint8_t* __restrict valid, std::int32_t* __restrict cell,
-    float* __restrict range) {
-  const double f0 = s.forward[0], f1 = s.forward[1], f2 = s.forward[2];
-  const double l0 = s.left[0], l1 = s.left[1], l2 = s.left[2];
-  const double u0 = s.up[0], u1 = s.up[1], u2 = s.up[2];
-  const double cols = s.cols, rows = s.rows;
-  const double max_az = s.max_azimuth_rad, max_tan = s.max_tan_elevation;
-  const double inv_res = s.inv_resolution;
-  const std::int32_t stride = s.cols;
+// Floats of the strip for PanCells, with the error bounds (below).
+struct FloatStrip {
+  float f0, f1, f2, l0, l1, l2, u0, u1, u2;
+  float max_az, max_tan, inv_res, cols, rows;
+  float ec, er;  // bounds of |col - col_double| and |row - row_double|, cells
+  float cut;     // branch-cut margin: |pl| <= cut * rho is too close to tell
+};
+
+// PanCells' loop. Error bounds, with e = 2^-24 and q = 1 + |t| >= |p| / rho (t = pu / rho the
+// elevation's tangent): each of pf, pl, pu is within 4e|p| <= 4e q rho of its double value
+// (axes rounded to float, two roundings of the sum); so the azimuth is within ~6e q of the
+// double FastAtan2 of the same point, plus atan2F's own 1e-6 rad and 3e pi for rounding the
+// strip's edge and the subtraction; t within ~16e q^2; col and row then gain 3e of their own
+// size (the scaling). Each bound is doubled and taken at the largest q of a point inside the
+// strip, q_max = 1 + max_tan + resolution + 1e-3, and the largest |col|, |row| there: constants
+// (PanCells). A point with q > q_max is beyond the strip's rows by more than its error (up to
+// |t| = 1e4, where that error is 16e q^2 < 1 % of t), so it is certainly out whatever its
+// column. A point is certainly in when [col - ec, col + ec] and [row - er, row + er] lie inside
+// the strip and inside one cell each, certainly out when either lies outside the strip;
+// otherwise, and near the axis (rho < 2e-6, ExactCell's limit is 1e-6), beyond 1e18 m or
+// |t| = 1e4, or near the azimuth's branch cut (pf < 0, |pl| <= 16e q_max rho, where the sign of
+// pl, and with it az = +-pi, can differ between float and double), it is left to ExactCell.
+// NaN fails every comparison: rechecked.
+[[gnu::noinline]] TOFCAM_HOT_LOOP void FastCells(std::size_t n, const FloatStrip& s,
+                                                 const float* __restrict x,
+                                                 const float* __restrict y,
+                                                 const float* __restrict z,
+                                                 std::int32_t* __restrict cell) {
+  const FloatStrip k = s;
+  const std::int32_t stride = static_cast<std::int32_t>(s.cols);
   for (std::size_t i = 0; i < n; ++i) {
-    const double px = bx[i], py = by[i], pz = bz[i];
-    const double pf = px * f0 + py * f1 + pz * f2;
-    const double pl = px * l0 + py * l1 + pz * l2;
-    const double pu = px * u0 + py * u1 + pz * u2;
-    const double rho = std::sqrt(pf * pf + pl * pl);
-    const bool off_axis = rho >= 1e-6;  // on the axis: no azimuth
-    const double az = FastAtan2(pl, pf);
-    const double col = (max_az - az) * inv_res;
-    const double row = (max_tan - pu / std::max(rho, 1e-6)) * inv_res;
-    const bool in =
-        (valid[i] != 0) & off_axis & (col >= 0.0) & (col < cols) & (row >= 0.0) & (row < rows);
-    const auto c = static_cast<std::int32_t>(Sel(in, col, 0.0));
-    const auto r = static_cast<std::int32_t>(Sel(in, row, 0.0));
-    cell[i] = (r * stride + c + 1) * static_cast<std::int32_t>(in) - 1;  // -1 when out
-    range[i] = static_cast<float>(std::sqrt(px * px + py * py + pz * pz));
+    const float px = x[i], py = y[i], pz = z[i];
+    const float pf = px * k.f0 + py * k.f1 + pz * k.f2;
+    const float pl = px * k.l0 + py * k.l1 + pz * k.l2;
+    const float pu = px * k.u0 + py * k.u1 + pz * k.u2;
+    const float rho = std::sqrt(pf * pf + pl * pl);
+    const float tan_el = pu / std::max(rho, 1e-6f);
+    const float col = (k.max_az - internal::FastAtan2F(pl, pf)) * k.inv_res;
+    const float row = (k.max_tan - tan_el) * k.inv_res;
+    const float c_lo = col - k.ec, c_hi = col + k.ec, r_lo = row - k.er, r_hi = row + k.er;
+    const bool inside = (c_lo >= 0.0f) & (c_hi < k.cols) & (r_lo >= 0.0f) & (r_hi < k.rows);
+    const bool outside = (c_hi < 0.0f) | (c_lo >= k.cols) | (r_hi < 0.0f) | (r_lo >= k.rows);
+    // Inside the strip the truncations are floors, and converting is defined.
+    const auto c0 = static_cast<std::int32_t>(internal::SelF(inside, c_lo, 0.0f));
+    const auto c1 = static_cast<std::int32_t>(internal::SelF(inside, c_hi, 0.0f));
+    const auto r0 = static_cast<std::int32_t>(internal::SelF(inside, r_lo, 0.0f));
+    const auto r1 = static_cast<std::int32_t>(internal::SelF(inside, r_hi, 0.0f));
+    const bool plain = (rho >= 2e-6f) & (rho <= 1e18f) & (std::abs(tan_el) <= 1e4f) &
+                       ((pf >= 0.0f) | (std::abs(pl) > k.cut * rho));
+    const bool in = plain & inside & (c0 == c1) & (r0 == r1);
+    const bool out = plain & outside;
+    // in: the cell; certainly out: -1; otherwise -2.
+    cell[i] =
+        static_cast<std::int32_t>(in) * (r0 * stride + c0 + 2) - 2 + static_cast<std::int32_t>(out);
   }
+}
+
+// Invalid points get kNoCell; returns how many valid ones FastCells left to recheck. Apart from
+// FastCells: with bytes in its loop GCC would unroll it four vectors deep and spill.
+[[gnu::noinline]] TOFCAM_HOT_LOOP std::uint32_t MaskInvalid(std::size_t n,
+                                                            const std::uint8_t* __restrict valid,
+                                                            std::int32_t* __restrict cell) {
+  std::uint32_t rechecks = 0;  // 32 bits: GCC vectorises the count (n < 2^32 here)
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int32_t c = valid[i] != 0 ? cell[i] : internal::kNoCell;
+    cell[i] = c;
+    rechecks += static_cast<std::uint32_t>(c == internal::kRecheckCell);
+  }
+  return rechecks;
 }
 
 // Reused per-frame buffers of MakePanView.
 struct Scratch {
-  PointCloud camera;
-  std::vector<float> bx, by, bz, range;
+  std::vector<float> bx, by, bz;
+  std::vector<double> range2;
   std::vector<std::uint8_t> valid;
   std::vector<std::int32_t> cell;
+  std::vector<float> nan_channel;         // a missing amplitude / intensity / ΔL
+  std::vector<std::uint16_t> zero_flags;  // missing flags
   void Resize(std::size_t n) {
-    for (auto* v : {&bx, &by, &bz, &range}) v->resize(n);
+    for (auto* v : {&bx, &by, &bz}) v->resize(n);
+    range2.resize(n);
     valid.resize(n);
     cell.resize(n);
   }
 };
 
-// Appends points [0, n) of one frame at `n_out` of the merged cloud (its arrays sized for every
-// point of every frame): each point is written, the end advances past the kept ones (valid, or
-// all with keep_all = 1). Returns the new end. Separate, with restrict pointers, so the compiler
-// keeps every pointer in a register (through the vectors it reloads them after each store).
-std::size_t AppendPoints(std::size_t n, std::uint8_t keep_all, const float* __restrict bx,
-                         const float* __restrict by, const float* __restrict bz,
-                         const float* __restrict a, const float* __restrict in,
-                         const float* __restrict dl, const PixelFlags* __restrict f,
-                         const std::uint8_t* __restrict valid, std::size_t n_out, PointCloud& out) {
-  float* __restrict ox = out.x.data();
-  float* __restrict oy = out.y.data();
-  float* __restrict oz = out.z.data();
-  float* __restrict oa = out.amplitude.data();
-  float* __restrict oi = out.intensity.data();
-  float* __restrict od = out.delta_l_m.data();
-  PixelFlags* __restrict of = out.flags.data();
-  for (std::size_t i = 0; i < n; ++i) {
-    ox[n_out] = bx[i];
-    oy[n_out] = by[i];
-    oz[n_out] = bz[i];
-    oa[n_out] = a[i];
-    oi[n_out] = in[i];
-    od[n_out] = dl[i];
+typedef float F8 __attribute__((vector_size(32)));
+typedef std::int32_t I8 __attribute__((vector_size(32)));
+typedef std::uint16_t H8 __attribute__((vector_size(16)));
+typedef std::uint8_t B8 __attribute__((vector_size(8)));
+
+// kPack[m]: the positions of m's set bits in ascending order (then zeros): the permutation
+// that moves the kept lanes of a block of eight to its front.
+struct PackTable {
+  std::uint8_t idx[256][8];
+};
+constexpr PackTable MakePackTable() {
+  PackTable t{};
+  for (int m = 0; m < 256; ++m) {
+    int k = 0;
+    for (int b = 0; b < 8; ++b) {
+      if ((m >> b) & 1) t.idx[m][k++] = static_cast<std::uint8_t>(b);
+    }
+  }
+  return t;
+}
+constexpr PackTable kPack = MakePackTable();
+
+// Appends points [0, n) of one frame at `n_out` of the merged cloud, whose arrays have room for
+// every point of every frame plus 8: the kept points (valid, or all with keep_all) in input
+// order. Blocks of eight: each channel's lanes are permuted so that the kept ones come first and
+// all eight are stored at the end, which then advances by the number kept (the rest is
+// overwritten by the next block or trimmed). Returns the new end.
+TOFCAM_HOT_LOOP std::size_t AppendPoints(std::size_t n, bool keep_all, const float* __restrict bx,
+                                         const float* __restrict by, const float* __restrict bz,
+                                         const float* __restrict a, const float* __restrict in,
+                                         const float* __restrict dl,
+                                         const std::uint16_t* __restrict f,
+                                         const std::uint8_t* __restrict valid, std::size_t n_out,
+                                         PointCloud& out) {
+  float* __restrict o[6] = {out.x.data(),         out.y.data(),         out.z.data(),
+                            out.amplitude.data(), out.intensity.data(), out.delta_l_m.data()};
+  const float* __restrict src[6] = {bx, by, bz, a, in, dl};
+  auto* __restrict of = reinterpret_cast<std::uint16_t*>(out.flags.data());
+  if (keep_all) {
+    for (int k = 0; k < 6; ++k) std::memcpy(o[k] + n_out, src[k], n * sizeof(float));
+    std::memcpy(of + n_out, f, n * sizeof(std::uint16_t));
+    return n_out + n;
+  }
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    std::uint64_t word;  // eight 0/1 bytes -> an 8-bit mask (bit b = byte b)
+    std::memcpy(&word, valid + i, sizeof word);
+    const auto m = static_cast<unsigned>((word * 0x0102040810204080ull) >> 56);
+    B8 idx8;
+    std::memcpy(&idx8, kPack.idx[m], sizeof idx8);
+    const I8 idx = __builtin_convertvector(idx8, I8);
+    for (int k = 0; k < 6; ++k) {
+      F8 v;
+      std::memcpy(&v, src[k] + i, sizeof v);
+      v = __builtin_shuffle(v, idx);
+      std::memcpy(o[k] + n_out, &v, sizeof v);
+    }
+    H8 fv;
+    std::memcpy(&fv, f + i, sizeof fv);
+    fv = __builtin_shuffle(fv, __builtin_convertvector(idx8, H8));
+    std::memcpy(of + n_out, &fv, sizeof fv);
+    n_out += static_cast<std::size_t>(__builtin_popcount(m));
+  }
+  for (; i < n; ++i) {
+    for (int k = 0; k < 6; ++k) o[k][n_out] = src[k][i];
     of[n_out] = f[i];
-    n_out += static_cast<std::size_t>(valid[i] | keep_all);
+    n_out += valid[i];
   }
   return n_out;
 }
 
-// `nearer ? a : b` on the bits, as integer masks: GCC compiles the float select below into
-// compare-and-branch, which mispredicted about every other point.
-[[gnu::always_inline]] inline float Pick(std::uint32_t mask, float a, float b) {
-  return std::bit_cast<float>((std::bit_cast<std::uint32_t>(a) & mask) |
-                              (std::bit_cast<std::uint32_t>(b) & ~mask));
-}
+// A panorama cell while the frames are splatted: the key of the nearest point so far (its
+// squared distance from the rotation centre; +inf when empty), its distance and amplitude.
+struct alignas(16) ZCell {
+  double range2;
+  float distance_m;
+  float amplitude;
+};
+static_assert(sizeof(ZCell) == 16);
+typedef std::uint64_t Q2 __attribute__((vector_size(16)));
 
 // Splat: the point nearest to the rotation centre wins its cell (the first of equals). Two
 // forms with the same result. Coarse pixels (fewer points than cells, e.g. SR-2 frames on the
-// default 0.5° strip): every point rewrites its cell branch-free, since neighbouring points
-// compete for different cells in an order no branch predictor learns (points outside the strip,
-// cell -1, rewrite cell 0 with its own values). Fine pixels (several points per cell): runs of
-// points hit one cell and rarely win it, so a branch predicts well, while rewriting the cell
-// every time would chain each point on the previous one's store (10 % slower at 1 MP).
-void SplatBranchy(std::size_t n, const std::int32_t* __restrict cell, const float* __restrict range,
-                  const float* __restrict d, const float* __restrict a, float* __restrict zb,
-                  float* __restrict pano_d, float* __restrict pano_a) {
+// default 0.5° strip): every point rewrites its 16-byte cell branch-free, since neighbouring
+// points compete for different cells in an order no branch predictor learns (points outside the
+// strip, cell < 0, rewrite cell 0 with its own value). Fine pixels (several points per cell):
+// runs of points hit one cell and rarely win it, so a branch predicts well, while rewriting the
+// cell every time would chain each point on the previous one's store.
+void SplatBranchy(std::size_t n, const std::int32_t* __restrict cell,
+                  const double* __restrict range2, const float* __restrict d,
+                  const float* __restrict a, ZCell* __restrict zb) {
   for (std::size_t i = 0; i < n; ++i) {
     const std::int32_t c = cell[i];
-    if (c >= 0 && range[i] < zb[c]) {
-      zb[c] = range[i];
-      pano_d[c] = d[i];
-      pano_a[c] = a[i];
-    }
+    if (c >= 0 && range2[i] < zb[c].range2) zb[c] = ZCell{range2[i], d[i], a[i]};
   }
 }
 
-void Splat(std::size_t n, const std::int32_t* __restrict cell, const float* __restrict range,
-           const float* __restrict d, const float* __restrict a, float* __restrict zb,
-           float* __restrict pano_d, float* __restrict pano_a) {
+void Splat(std::size_t n, const std::int32_t* __restrict cell, const double* __restrict range2,
+           const float* __restrict d, const float* __restrict a, ZCell* __restrict zb) {
   for (std::size_t i = 0; i < n; ++i) {
     const std::int32_t inside = -static_cast<std::int32_t>(cell[i] >= 0);
-    const std::int32_t c = cell[i] & inside;
-    const std::uint32_t nearer =
-        static_cast<std::uint32_t>(inside & -static_cast<std::int32_t>(range[i] < zb[c]));
-    zb[c] = Pick(nearer, range[i], zb[c]);
-    pano_d[c] = Pick(nearer, d[i], pano_d[c]);
-    pano_a[c] = Pick(nearer, a[i], pano_a[c]);
+    ZCell* __restrict z = zb + (cell[i] & inside);
+    Q2 old;
+    std::memcpy(&old, z, sizeof old);
+    // The candidate record built in registers (through memory its two halves would be stored
+    // separately and reloaded as one, which store forwarding cannot serve).
+    const Q2 next = {std::bit_cast<std::uint64_t>(range2[i]),
+                     std::bit_cast<std::uint32_t>(d[i]) |
+                         (std::uint64_t{std::bit_cast<std::uint32_t>(a[i])} << 32)};
+    const std::uint64_t nearer =
+        0 - static_cast<std::uint64_t>((inside != 0) & (range2[i] < z->range2));
+    const Q2 m = {nearer, nearer};
+    const Q2 merged = (next & m) | (old & ~m);
+    std::memcpy(z, &merged, sizeof merged);
   }
 }
 
@@ -194,6 +286,16 @@ void PanViewOptions::Validate() const {
     throw Error(ErrorCode::kInvalidArgument,
                 "pan view: max_elevation_deg = " + std::to_string(max_elevation_deg) +
                     " is outside (0, 80]");
+  }
+  // The panorama's cells are indexed in 32 bits and each costs 27 bytes while the view is built.
+  const double cells =
+      std::ceil((max_azimuth_deg - min_azimuth_deg) / resolution_deg - 1e-9) *
+      std::ceil(2.0 * std::tan(max_elevation_deg * kDeg) / (resolution_deg * kDeg) - 1e-9);
+  if (cells > kMaxPanoramaCells) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "pan view: the strip would have " + std::to_string(cells / 1e6) +
+                    " million cells (at most " + std::to_string(kMaxPanoramaCells / 1e6) +
+                    " million): choose a coarser resolution_deg or a narrower strip");
   }
   color.Validate();
 }
@@ -234,19 +336,14 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
       std::ceil((o.max_azimuth_deg - o.min_azimuth_deg) / o.resolution_deg - 1e-9));
   const int rows =
       static_cast<int>(std::ceil(2.0 * view.max_tan_elevation / view.resolution_rad - 1e-9));
+  const std::size_t n_cells = static_cast<std::size_t>(cols) * static_cast<std::size_t>(rows);
   // Reused storage: the previous view's images and a per-thread z-buffer (a fresh 100 KB+ image
   // per call is a fresh mapping from the kernel, page-faulted in on every call).
-  auto reset = [cols, rows](Image<float>& image, float value) {
-    if (image.SameSize(cols, rows)) {
-      std::fill(image.data(), image.data() + image.size(), value);
-    } else {
-      image = Image<float>(cols, rows, value);
-    }
-  };
-  reset(view.panorama_distance_m, kNan);
-  reset(view.panorama_amplitude, kNan);
-  thread_local Image<float> zbuffer;
-  reset(zbuffer, std::numeric_limits<float>::infinity());
+  for (Image<float>* image : {&view.panorama_distance_m, &view.panorama_amplitude}) {
+    if (!image->SameSize(cols, rows)) *image = Image<float>(cols, rows);
+  }
+  thread_local std::vector<ZCell> zbuffer;
+  zbuffer.assign(n_cells, ZCell{std::numeric_limits<double>::infinity(), kNan, kNan});
   view.frame_offsets.clear();
   view.camera_to_base.clear();
 
@@ -254,7 +351,7 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   const Eigen::Vector3d z(0.0, 0.0, 1.0);
   const Eigen::Vector3d forward = (z - z.dot(up) * up).normalized();
   const Eigen::Vector3d left = up.cross(forward);
-  Strip strip{};
+  internal::PanStrip strip{};
   for (int i = 0; i < 3; ++i) {
     strip.forward[i] = forward[i];
     strip.left[i] = left[i];
@@ -268,8 +365,9 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   view.cloud.height = 1;
   view.frame_offsets.push_back(0);
 
-  // The merged cloud is written in place (at most every point of every frame), then trimmed.
-  std::size_t capacity = 0;
+  // The merged cloud is written in place (room for every point of every frame, plus a block of
+  // eight for the append's vector stores), then trimmed.
+  std::size_t capacity = 8;
   for (const MetricFrame& frame : frames) capacity += frame.radial_distance_m.size();
   PointCloud& out = view.cloud;
   for (auto* v : {&out.x, &out.y, &out.z, &out.amplitude, &out.intensity, &out.delta_l_m}) {
@@ -278,42 +376,55 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   out.flags.resize(capacity);
   std::size_t n_out = 0;
   thread_local Scratch sc;
-  float* zb = zbuffer.data();
-  float* pano_d = view.panorama_distance_m.data();
-  float* pano_a = view.panorama_amplitude.data();
-
+  static_assert(sizeof(PixelFlags) == sizeof(std::uint16_t));
   for (std::size_t k = 0; k < frames.size(); ++k) {
     const MetricFrame& frame = frames[k];
-    MakePointCloudInto(frame, rays, sc.camera, o.cloud);
-    const Eigen::Isometry3d pose = o.pan_unit.CameraToBase(frame.info.pan_angle_rad);
+    kernels::CheckCloudInputs(frame, rays);
     if (!std::isfinite(frame.info.pan_angle_rad)) {
       throw Error(ErrorCode::kInvalidArgument,
                   "pan view: frame " + std::to_string(k) + " has a non-finite pan angle");
     }
+    const Eigen::Isometry3d pose = o.pan_unit.CameraToBase(frame.info.pan_angle_rad);
     view.camera_to_base.push_back(pose);
     const Eigen::Matrix3f rot = pose.linear().cast<float>();  // column-major
     const Eigen::Vector3f tr = pose.translation().cast<float>();
-    const PointCloud& cam = sc.camera;
-    const std::size_t n = cam.size();
-    sc.Resize(n);
-    static_assert(sizeof(PixelFlags) == sizeof(std::uint16_t));
-    TransformPoints(n, rot.data(), tr.data(), cam.x.data(), cam.y.data(), cam.z.data(),
-                    reinterpret_cast<const std::uint16_t*>(cam.flags.data()), sc.bx.data(),
-                    sc.by.data(), sc.bz.data(), sc.valid.data());
-    // Append (the valid points, or all) in input order, branch-free: every point is written at
-    // the end and the end advances only past the kept ones (the capacity has room for all).
-    n_out = AppendPoints(n, o.only_valid ? 0 : 1, sc.bx.data(), sc.by.data(), sc.bz.data(),
-                         cam.amplitude.data(), cam.intensity.data(), cam.delta_l_m.data(),
-                         cam.flags.data(), sc.valid.data(), n_out, out);
+    const std::size_t n = frame.radial_distance_m.size();
+    sc.Resize(std::min(n, kChunk));
+    // Missing channels: NaN values, clear flags (as MakePointCloud).
+    auto channel = [&](const Image<float>& c) {
+      if (!c.empty()) return c.data();
+      if (sc.nan_channel.size() < n) sc.nan_channel.assign(n, kNan);
+      return static_cast<const float*>(sc.nan_channel.data());
+    };
+    const float* amplitude = channel(frame.amplitude);
+    const float* intensity = channel(frame.intensity);
+    const float* delta_l = channel(frame.delta_l_m);
+    const std::uint16_t* flags = nullptr;
+    if (frame.flags.empty()) {
+      if (sc.zero_flags.size() < n) sc.zero_flags.assign(n, 0);
+      flags = sc.zero_flags.data();
+    } else {
+      flags = reinterpret_cast<const std::uint16_t*>(frame.flags.data());
+    }
+    // Chunks of kChunk points through every pass, so that the scratch arrays stay in the core's
+    // cache (at 1 MP a whole frame's would go through memory five times).
+    const bool coarse = n < n_cells;
+    const float* d = frame.radial_distance_m.data();
+    for (std::size_t b = 0; b < n; b += kChunk) {
+      const std::size_t m = std::min(kChunk, n - b);
+      BasePoints(m, d + b, flags + b, o.cloud.nan_mask, rays.x.data() + b, rays.y.data() + b,
+                 rays.z.data() + b, rot.data(), tr.data(), sc.bx.data(), sc.by.data(), sc.bz.data(),
+                 sc.valid.data(), sc.range2.data());
+      n_out =
+          AppendPoints(m, !o.only_valid, sc.bx.data(), sc.by.data(), sc.bz.data(), amplitude + b,
+                       intensity + b, delta_l + b, flags + b, sc.valid.data(), n_out, out);
+      // Panorama cells, then the z-buffered splat.
+      (void)internal::PanCells(m, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
+                               sc.cell.data());
+      (coarse ? Splat : SplatBranchy)(m, sc.cell.data(), sc.range2.data(), d + b, amplitude + b,
+                                      zbuffer.data());
+    }
     view.frame_offsets.push_back(n_out);
-
-    // Panorama cells, then the z-buffered splat.
-    CellsOfPoints(n, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
-                  sc.cell.data(), sc.range.data());
-    const bool coarse = n < zbuffer.size();
-    (coarse ? Splat : SplatBranchy)(n, sc.cell.data(), sc.range.data(),
-                                    frame.radial_distance_m.data(), cam.amplitude.data(), zb,
-                                    pano_d, pano_a);
   }
   for (auto* v : {&out.x, &out.y, &out.z, &out.amplitude, &out.intensity, &out.delta_l_m}) {
     v->resize(n_out);
@@ -321,11 +432,64 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   out.flags.resize(n_out);
   view.cloud.width = static_cast<int>(view.cloud.x.size());
   if (view.cloud.width == 0) view.cloud.height = 0;
+  float* pano_d = view.panorama_distance_m.data();
+  float* pano_a = view.panorama_amplitude.data();
+  for (std::size_t c = 0; c < n_cells; ++c) {
+    pano_d[c] = zbuffer[c].distance_m;
+    pano_a[c] = zbuffer[c].amplitude;
+  }
 
   const double f_hz = frames[0].info.modulation_frequency_hz;
   const double far_default = (std::isfinite(f_hz) && f_hz > 0.0) ? UnambiguousRangeM(f_hz) : 0.0;
   FalseColorImageInto(view.panorama_distance_m, Image<PixelFlags>(), view.panorama_amplitude,
                       far_default, o.color, view.panorama);
 }
+
+namespace internal {
+
+std::size_t PanCells(std::size_t n, const PanStrip& s, const float* x, const float* y,
+                     const float* z, const std::uint8_t* valid, std::int32_t* cell) {
+  FloatStrip f{};
+  f.f0 = static_cast<float>(s.forward[0]);
+  f.f1 = static_cast<float>(s.forward[1]);
+  f.f2 = static_cast<float>(s.forward[2]);
+  f.l0 = static_cast<float>(s.left[0]);
+  f.l1 = static_cast<float>(s.left[1]);
+  f.l2 = static_cast<float>(s.left[2]);
+  f.u0 = static_cast<float>(s.up[0]);
+  f.u1 = static_cast<float>(s.up[1]);
+  f.u2 = static_cast<float>(s.up[2]);
+  f.max_az = static_cast<float>(s.max_azimuth_rad);
+  f.max_tan = static_cast<float>(s.max_tan_elevation);
+  f.inv_res = static_cast<float>(s.inv_resolution);
+  f.cols = static_cast<float>(s.cols);
+  f.rows = static_cast<float>(s.rows);
+  constexpr double kE = 0x1p-24;
+  const double inv_res = s.inv_resolution, max_tan = std::abs(s.max_tan_elevation);
+  const double q_max = 1.0 + max_tan + 1.0 / inv_res + 1e-3;
+  f.ec = static_cast<float>(
+      2.0 * (inv_res * (1e-6 + kE * (6.0 * q_max + 10.0)) + 3.0 * kE * (s.cols + 1.0)));
+  f.er = static_cast<float>(
+      2.0 * (inv_res * kE * (16.0 * q_max * q_max + 2.0 * max_tan) + 3.0 * kE * (s.rows + 1.0)));
+  f.cut = static_cast<float>(16.0 * kE * q_max);
+  FastCells(n, f, x, y, z, cell);
+  const std::size_t rechecks = MaskInvalid(n, valid, cell);
+  // A few per mille of the points: find them eight at a time.
+  std::size_t left = rechecks;
+  for (std::size_t i0 = 0; left > 0 && i0 < n; i0 += 8) {
+    const std::size_t end = std::min(i0 + 8, n);
+    bool any = false;
+    for (std::size_t i = i0; i < end; ++i) any |= cell[i] == kRecheckCell;
+    if (!any) continue;
+    for (std::size_t i = i0; i < end; ++i) {
+      if (cell[i] != kRecheckCell) continue;
+      cell[i] = ExactCell(s, x[i], y[i], z[i]);
+      --left;
+    }
+  }
+  return rechecks;
+}
+
+}  // namespace internal
 
 }  // namespace tofcam

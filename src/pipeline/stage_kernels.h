@@ -85,7 +85,10 @@ void PixelFiltersOrSpan(const PixelFilterPlan& plan, std::size_t n, const float*
 
 // --- Stage 6: the organised point cloud (src/cloud/point_cloud.cc) ----------------------------
 
-// Checks the frame and rays and sizes the cloud; throws like MakePointCloudInto.
+// Checks that the frame has a distance image, that its other channels have that size and that
+// `rays` does; throws like MakePointCloudInto.
+void CheckCloudInputs(const MetricFrame& frame, const RayTable& rays);
+// CheckCloudInputs, then sizes the cloud.
 void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud);
 // Points [begin, begin + n) of the cloud from the span's channels (pointers at the span's first
 // pixel; a, i, dl, f may be nullptr when the frame has none: NaN / clear flags).

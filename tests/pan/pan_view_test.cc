@@ -131,10 +131,11 @@ TEST(PanViewTest, SyntheticRoomPanoramaColumnsMapToAzimuths) {
   EXPECT_GE(filled, covered * 95 / 100);  // at most a few holes in the covered part
 }
 
-// The view as MakePanView computed it before its speed work (issue 19): whole-cloud transform,
-// libm atan2 and hypot per point. The fast version must give the same cloud bit for bit and the
-// same panorama cells (its atan2 polynomial is within 1e-10 rad, so a point would have to lie
-// within that of a cell border to land elsewhere).
+// The view by its definition, point by point: the whole-cloud transform, libm atan2 and hypot
+// for the cell, and in each cell the point with the smallest squared distance from the rotation
+// centre (in double; the first of equals). The fast version must give the same cloud bit for
+// bit and the same panorama cells (its double-precision azimuth is within 1e-10 rad of libm's, so
+// a point would have to lie within that of a cell border to land elsewhere).
 struct Reference {
   PointCloud cloud;
   Image<float> distance, amplitude;
@@ -144,7 +145,7 @@ Reference ReferenceView(const std::vector<MetricFrame>& frames, const RayTable& 
   Reference ref;
   ref.distance = Image<float>(cols, rows, std::nanf(""));
   ref.amplitude = Image<float>(cols, rows, std::nanf(""));
-  Image<float> zbuffer(cols, rows, std::numeric_limits<float>::infinity());
+  Image<double> zbuffer(cols, rows, std::numeric_limits<double>::infinity());
   const double res = o.resolution_deg * kDeg, max_az = o.max_azimuth_deg * kDeg;
   const double max_tan = std::tan(o.max_elevation_deg * kDeg);
   const Eigen::Vector3d up = o.pan_unit.axis.normalized(), z(0, 0, 1);
@@ -153,10 +154,17 @@ Reference ReferenceView(const std::vector<MetricFrame>& frames, const RayTable& 
     const PointCloud base = TransformPointCloud(MakePointCloud(frame, rays, o.cloud),
                                                 o.pan_unit.CameraToBase(frame.info.pan_angle_rad));
     for (std::size_t i = 0; i < base.size(); ++i) {
-      if (!base.IsValid(i)) continue;
-      ref.cloud.x.push_back(base.x[i]);
-      ref.cloud.y.push_back(base.y[i]);
-      ref.cloud.z.push_back(base.z[i]);
+      const bool valid = base.IsValid(i);
+      if (valid || !o.only_valid) {
+        ref.cloud.x.push_back(base.x[i]);
+        ref.cloud.y.push_back(base.y[i]);
+        ref.cloud.z.push_back(base.z[i]);
+        ref.cloud.amplitude.push_back(base.amplitude[i]);
+        ref.cloud.intensity.push_back(base.intensity[i]);
+        ref.cloud.delta_l_m.push_back(base.delta_l_m[i]);
+        ref.cloud.flags.push_back(base.flags[i]);
+      }
+      if (!valid) continue;
       const Eigen::Vector3d p(base.x[i], base.y[i], base.z[i]);
       const double pf = p.dot(forward), pl = p.dot(left), pu = p.dot(up);
       const double rho = std::hypot(pf, pl);
@@ -165,15 +173,20 @@ Reference ReferenceView(const std::vector<MetricFrame>& frames, const RayTable& 
       const double row = (max_tan - pu / rho) / res;
       if (!(col >= 0.0 && col < cols && row >= 0.0 && row < rows)) continue;
       const int c = static_cast<int>(col), r = static_cast<int>(row);
-      const float range = static_cast<float>(p.norm());
-      if (range < zbuffer(r, c)) {
-        zbuffer(r, c) = range;
+      const double range2 = p.x() * p.x() + p.y() * p.y() + p.z() * p.z();
+      if (range2 < zbuffer(r, c)) {
+        zbuffer(r, c) = range2;
         ref.distance(r, c) = frame.radial_distance_m.data()[i];
         ref.amplitude(r, c) = base.amplitude[i];
       }
     }
   }
   return ref;
+}
+
+// Same values bit for bit (so NaN equals NaN).
+bool SameBits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
 }
 
 TEST(PanViewTest, SameViewAsTheStraightforwardAssembly) {
@@ -190,46 +203,54 @@ TEST(PanViewTest, SameViewAsTheStraightforwardAssembly) {
     f.radial_distance_m = Image<float>(k.width, k.height);
     f.amplitude = Image<float>(k.width, k.height);
     f.flags = Image<PixelFlags>(k.width, k.height);
+    f.delta_l_m = Image<float>(k.width, k.height);
     for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
       f.radial_distance_m.data()[i] = static_cast<float>(0.3 + 6.0 * next());
       f.amplitude.data()[i] = static_cast<float>(100 + 1000 * next());
-      if (next() < 0.1) f.flags.data()[i].Set(Flag::kLowAmplitude);
+      f.delta_l_m.data()[i] = static_cast<float>(0.1 * next());
+      // Runs of kept and rejected pixels of every length, so the append meets every mask.
+      if (next() < (i / 512 % 2 == 0 ? 0.1 : 0.6)) f.flags.data()[i].Set(Flag::kLowAmplitude);
+      if (i % 997 == 0) f.radial_distance_m.data()[i] = std::nanf("");
     }
     f.info.pan_angle_rad = deg * kDeg;
     frames.push_back(std::move(f));
   }
+  // The last frame without flags (all its points count; missing channels become NaN / clear).
+  frames.back().flags = Image<PixelFlags>();
   // The default 0.5° strip has more cells than a frame has points (the branch-free splat); the
-  // 2° strip fewer (several points per cell: the splat with a branch).
+  // 2° strip fewer (several points per cell: the splat with a branch). All points kept, too.
   for (const double resolution_deg : {0.5, 2.0}) {
-    SCOPED_TRACE(resolution_deg);
-    PanViewOptions o;
-    o.resolution_deg = resolution_deg;
-    const PanView view = MakePanView(frames, rays, o);
-    const Reference ref = ReferenceView(frames, rays, o, view.panorama_distance_m.width(),
-                                        view.panorama_distance_m.height());
-    ASSERT_EQ(view.cloud.size(), ref.cloud.size());
-    EXPECT_EQ(view.cloud.x, ref.cloud.x);
-    EXPECT_EQ(view.cloud.y, ref.cloud.y);
-    EXPECT_EQ(view.cloud.z, ref.cloud.z);
-    int filled = 0;
-    for (std::size_t i = 0; i < ref.distance.size(); ++i) {
-      const float a = view.panorama_distance_m.data()[i], b = ref.distance.data()[i];
-      if (std::isnan(b)) {
-        EXPECT_TRUE(std::isnan(a)) << i;
-        continue;
+    for (const bool only_valid : {true, false}) {
+      SCOPED_TRACE(testing::Message() << resolution_deg << " deg, only_valid " << only_valid);
+      PanViewOptions o;
+      o.resolution_deg = resolution_deg;
+      o.only_valid = only_valid;
+      const PanView view = MakePanView(frames, rays, o);
+      const Reference ref = ReferenceView(frames, rays, o, view.panorama_distance_m.width(),
+                                          view.panorama_distance_m.height());
+      ASSERT_EQ(view.cloud.size(), ref.cloud.x.size());
+      EXPECT_TRUE(SameBits(view.cloud.x, ref.cloud.x));
+      EXPECT_TRUE(SameBits(view.cloud.y, ref.cloud.y));
+      EXPECT_TRUE(SameBits(view.cloud.z, ref.cloud.z));
+      EXPECT_TRUE(SameBits(view.cloud.amplitude, ref.cloud.amplitude));
+      EXPECT_TRUE(SameBits(view.cloud.intensity, ref.cloud.intensity));
+      EXPECT_TRUE(SameBits(view.cloud.delta_l_m, ref.cloud.delta_l_m));
+      EXPECT_EQ(view.cloud.flags, ref.cloud.flags);
+      int filled = 0;
+      for (std::size_t i = 0; i < ref.distance.size(); ++i) {
+        const float a = view.panorama_distance_m.data()[i], b = ref.distance.data()[i];
+        if (std::isnan(b)) {
+          EXPECT_TRUE(std::isnan(a)) << i;
+          continue;
+        }
+        ++filled;
+        EXPECT_EQ(a, b) << i;
+        EXPECT_EQ(view.panorama_amplitude.data()[i], ref.amplitude.data()[i]) << i;
       }
-      ++filled;
-      EXPECT_EQ(a, b) << i;
-      EXPECT_EQ(view.panorama_amplitude.data()[i], ref.amplitude.data()[i]) << i;
+      // Most of the strip the five frames cover is filled.
+      EXPECT_GT(filled, static_cast<int>(view.panorama_distance_m.size() / 3));
     }
-    // Most of the strip the five frames cover is filled.
-    EXPECT_GT(filled, static_cast<int>(view.panorama_distance_m.size() / 3));
   }
-}
-
-// Same values bit for bit (so NaN equals NaN).
-bool SameBits(const std::vector<float>& a, const std::vector<float>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
 }
 
 // Everything a view holds, compared field by field.
@@ -310,6 +331,13 @@ TEST(PanViewTest, ErrorsAreReported) {
   o.min_azimuth_deg = 10;
   o.max_azimuth_deg = -10;
   EXPECT_THROW(o.Validate(), Error);
+  o = {};
+  o.resolution_deg = 0.01;  // 36000 x 11547 cells over 360° x ±30°: too many
+  o.min_azimuth_deg = -180;
+  o.max_azimuth_deg = 180;
+  EXPECT_THROW(o.Validate(), Error);
+  o.max_azimuth_deg = -170;  // 1000 x 11547: fine
+  EXPECT_NO_THROW(o.Validate());
   std::vector<MetricFrame> frames(1);
   frames[0].radial_distance_m = Image<float>(4, 4, 1.0f);
   try {

@@ -19,6 +19,9 @@
 
 namespace tofcam {
 
+/// Most cells a panorama may have (e.g. 0.02° over 180° x ±30°: 10.4 million).
+inline constexpr double kMaxPanoramaCells = 5e7;
+
 /// Panorama geometry: a cylinder of radius 1 around the pan axis through the rotation centre,
 /// unrolled. Azimuth is the angle about the axis from the base z axis (the camera's view at pan
 /// angle 0), positive counter-clockwise about the axis (to the left with the default axis, the
@@ -36,6 +39,8 @@ struct PanViewOptions {
   double max_azimuth_deg = 90.0;    ///< Left edge, degrees; > min_azimuth_deg, <= 180.
   double max_elevation_deg = 30.0;  ///< Strip spans ±this elevation, degrees; (0, 80].
   FalseColorOptions color;          ///< Colour law; far_m = 0 uses L of the first frame.
+  /// Throws Error(kInvalidArgument) for an option outside its range or a strip of more than
+  /// kMaxPanoramaCells cells.
   void Validate() const;
 };
 
@@ -47,7 +52,8 @@ struct PanView {
   std::vector<std::size_t> frame_offsets;
   std::vector<Eigen::Isometry3d> camera_to_base;  ///< Pose of each input frame.
   /// Per cell, the measured radial distance (m, from its camera) of the point nearest to the
-  /// rotation centre that falls in the cell; NaN where no point fell.
+  /// rotation centre that falls in the cell (by x² + y² + z² in double precision from the float
+  /// base-frame coordinates; the first of equals); NaN where no point fell.
   Image<float> panorama_distance_m;
   Image<float> panorama_amplitude;  ///< Amplitude of that point; NaN where empty.
   Image<Rgb8> panorama;             ///< False colour of panorama_distance_m; empty cells black.
@@ -70,7 +76,9 @@ struct PanView {
 /// Builds the view from frames whose `info.pan_angle_rad` says where the servo pointed. Each
 /// frame becomes a camera-frame cloud (MakePointCloud), is moved by
 /// `pan_unit.CameraToBase(pan_angle_rad)` and appended; valid points are splatted into the
-/// panorama cell they fall in (nearest to the rotation centre wins). Throws
+/// panorama cell they fall in (nearest to the rotation centre wins). The cloud is that
+/// construction's bit for bit, though built in one pass per frame; a point's cell is defined in
+/// double precision (its azimuth within 1e-10 rad of atan2's). Throws
 /// Error(kInvalidArgument) for no frames or bad options, Error(kMismatch) when a frame does not
 /// fit `rays`.
 [[nodiscard]] PanView MakePanView(std::span<const MetricFrame> frames, const RayTable& rays,
