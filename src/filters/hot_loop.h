@@ -15,6 +15,11 @@
 
 #if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
 #define TOFCAM_HOT_LOOP __attribute__((target_clones("avx2", "default")))
+// A third clone for AVX-512 CPUs (x86-64-v4: 16 float lanes, 32 vector registers, FMA), only for
+// loops measured to gain from it (long per-element arithmetic that spills with 16 registers) and
+// whose results do not depend on fused multiply-adds.
+#define TOFCAM_HOT_LOOP_WIDE __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #else
 #define TOFCAM_HOT_LOOP
+#define TOFCAM_HOT_LOOP_WIDE
 #endif

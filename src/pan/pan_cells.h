@@ -32,8 +32,7 @@ constexpr std::int32_t kRecheckCell = -2;
 
 /// The cell of the finite base-frame point (x, y, z), or kNoCell when it is within 1e-6 m of
 /// the axis (no azimuth) or outside the strip. The definition of a point's cell.
-[[gnu::always_inline]] inline std::int32_t ExactCell(const PanStrip& s, float x, float y,
-                                                     float z) {
+[[gnu::always_inline]] inline std::int32_t ExactCell(const PanStrip& s, float x, float y, float z) {
   const double px = x, py = y, pz = z;
   const double pf = px * s.forward[0] + py * s.forward[1] + pz * s.forward[2];
   const double pl = px * s.left[0] + py * s.left[1] + pz * s.left[2];

@@ -53,8 +53,7 @@ TEST(FastAtan2Test, FloatFormWithin1e6RadOfLibmOnItsInputs) {
   double worst = 0.0;
   for (const auto& [y, x] : Inputs()) {
     const float yf = static_cast<float>(y), xf = static_cast<float>(x);
-    const long double ref =
-        std::atan2(static_cast<long double>(yf), static_cast<long double>(xf));
+    const long double ref = std::atan2(static_cast<long double>(yf), static_cast<long double>(xf));
     worst = std::max(worst, static_cast<double>(std::abs(FastAtan2F(yf, xf) - ref)));
   }
   // Documented bound 1e-6 rad (PanCells' error bound relies on it); the series' truncation is

@@ -106,14 +106,18 @@ TEST(PanCellsTest, EveryPointGetsTheExactCell) {
     double res_deg, min_az, max_az, max_el;
   };
   const Case cases[] = {
-      {{0, 1, 0}, 0.5, -90, 90, 30},       {{0, -1, 0}, 0.5, -90, 90, 30},
-      {{0, 1, 0}, 0.01, -10, 10, 30},      {{0, 1, 0}, 0.1, -180, 180, 45},
-      {{0.2, 1, 0.1}, 2.0, -180, 180, 80}, {{0, 1, 0}, 10.0, -10, 170, 80},
+      {{0, 1, 0}, 0.5, -90, 90, 30},
+      {{0, -1, 0}, 0.5, -90, 90, 30},
+      {{0, 1, 0}, 0.01, -10, 10, 30},
+      {{0, 1, 0}, 0.1, -180, 180, 45},
+      {{0.2, 1, 0.1}, 2.0, -180, 180, 80},
+      {{0, 1, 0}, 10.0, -10, 170, 80},
       {{-0.3, 1, 0.4}, 0.05, -60, 30, 10},
       // 0.7 deg does not divide 360: both sides of the branch cut (az = +-pi) are in the strip,
       // in cells 0 and 514.
       // (A tilted axis, so that pl = p . left is rounded in float and its sign can flip.)
-      {{0, 1, 0}, 0.7, -180, 180, 30},     {{0.3, 1, -0.2}, 0.7, -180, 180, 30},
+      {{0, 1, 0}, 0.7, -180, 180, 30},
+      {{0.3, 1, -0.2}, 0.7, -180, 180, 30},
   };
   std::uint64_t seed = 1;
   for (const Case& c : cases) {
