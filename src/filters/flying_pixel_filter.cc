@@ -119,20 +119,21 @@ TOFCAM_HOT_LOOP std::uint32_t DistanceCandidates(
 }
 
 // Population variance n·Σa² - (Σa)² over n², clamped against rounding below zero;
-// std/mean >= contrast  <=>  var·n² >= (contrast·mean·n)²  (both sides >= 0).
+// std/mean >= contrast  <=>  var·n² >= (contrast·mean·n)²  (both sides >= 0), with
+// mean·n = max(Σa / n, floor)·n = max(Σa, floor·n) (n > 0): no division.
 [[gnu::always_inline]] inline bool ContrastAtLeast(float cnt, float sum, float sum2,
                                                    const Thresholds& t) {
   const float nn = std::max(cnt, 1.0f);
   const float var_n2 = std::max(nn * sum2 - sum * sum, 0.0f);
-  const float mean = std::max(sum / nn, t.floor_a);
-  const float lim = t.contrast * mean * nn;
+  const float lim = t.contrast * std::max(sum, t.floor_a * nn);
   return var_n2 >= lim * lim;
 }
 
 // The whole rule over a row in one pass (3-min / 3-max rows lu..hv, horizontal sums nu..qv, the
-// mid row's weights cw), for rows with many candidates; ORs the flag into f and echo (see
-// FlyingPixelInto) and returns the number of pixels that passed the distance conditions (to
-// choose the next row's form).
+// mid row's weights cw), for rows with many candidates; ORs the flag into f and, with kEcho,
+// into echo (see FlyingPixelInto), and returns the number of pixels that passed the distance
+// conditions (to choose the next row's form).
+template <bool kEcho>
 TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float* __restrict lu,
                                         const float* __restrict lm, const float* __restrict lv,
                                         const float* __restrict hu, const float* __restrict hm,
@@ -152,7 +153,7 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
         pass & static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
                                                      qu[c] + qm[c] + qv[c], t));
     f[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
-    echo[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
+    if constexpr (kEcho) echo[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
   }
   return count;
 }
@@ -247,9 +248,12 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       const float* nu = sums(ku, r - 1);
       const float* nm = sums(km, r);
       const float* nv = sums(kv, r + 1);
-      const std::size_t count = DecideRow(
-          w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv), d, m.w, nu, nm,
-          nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw, nv + 2 * sw, f, e);
+      const std::size_t count =
+          (echo != nullptr ? DecideRow<true>
+                           : DecideRow<false>)(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku),
+                                               hi_of(km), hi_of(kv), d, m.w, nu, nm, nv, nu + sw,
+                                               nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw,
+                                               nv + 2 * sw, f, e);
       dense = 16 * count > sw;
     };
     if (dense) {
