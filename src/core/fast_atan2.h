@@ -56,7 +56,9 @@ inline double FastAtan2(double y, double x) {
 
 /// FastAtan2 in single precision (eight lanes per AVX2 vector): the same reduction, the series
 /// to u^15 (truncation below tan(pi/8)^17 / 17 < 2e-8 rad), the rest float rounding; within
-/// 1e-6 rad of atan2 for finite inputs (tests/core/fast_atan2_test.cc measures it).
+/// 1e-6 rad of atan2 (tests/core/fast_atan2_test.cc asserts it; 2.7e-7 measured) where
+/// max(|x|, |y|) lies in [1e-30, 1e38]. Outside that, |x| + |y| overflows or the guard against
+/// a zero divisor distorts the ratio (errors up to 0.2 rad): callers keep inputs in range.
 inline float FastAtan2F(float y, float x) {
   constexpr float kTanPi8 = 0.41421356237309504880f;
   constexpr float kPiF = static_cast<float>(kPi);

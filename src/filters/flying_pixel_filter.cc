@@ -184,7 +184,8 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   s.minmax.resize(4 * 2 * sw);
   s.sums.assign(4 * 3 * sw, 0.0f);  // the neutral slot's sums stay 0
   s.candidate.assign((sw + 7) / 8 * 8, 0);
-  // Without an echo image the dense rows echo into a scratch row nobody reads.
+  // Without an echo image the sparse rows echo into a scratch row nobody reads (the dense rows
+  // skip the echo: DecideRow<false>).
   s.echo_sink.resize(sw);
   // Slot k in 0..3 (3 = neutral); pointers at column 0 of the padded rows.
   auto prepared = [&](int k) {

@@ -46,9 +46,9 @@ constexpr std::int32_t kRecheckCell = -2;
   return static_cast<std::int32_t>(row) * s.cols + static_cast<std::int32_t>(col);
 }
 
-/// Per point i < n: its cell when valid[i] != 0 and the float computation is certain of it,
-/// kNoCell when invalid or certainly outside, kRecheckCell when only ExactCell can tell.
-/// Points must be finite where valid. Returns the number of kRecheckCell points.
+/// Per point i < n: ExactCell's cell (or kNoCell) where valid[i] != 0, kNoCell where not. The
+/// float loop decides most points; the rest (its kRecheckCell) get ExactCell. Points must be
+/// finite where valid. Returns how many points needed ExactCell.
 std::size_t PanCells(std::size_t n, const PanStrip& s, const float* x, const float* y,
                      const float* z, const std::uint8_t* valid, std::int32_t* cell);
 

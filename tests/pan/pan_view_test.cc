@@ -190,7 +190,13 @@ bool SameBits(const std::vector<float>& a, const std::vector<float>& b) {
 }
 
 TEST(PanViewTest, SameViewAsTheStraightforwardAssembly) {
-  const CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
+  // The SR-2's optics on 161 x 123 pixels: 19803 points a frame, four chunks of 4096 and one of
+  // 3419 (not a multiple of 8): the append's vector blocks and its scalar tail both run.
+  CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
+  k.width = 161;
+  k.height = 123;
+  k.cx_px = 80.0;
+  k.cy_px = 61.0;
   const RayTable rays = MakeRayTable(k);
   std::vector<MetricFrame> frames;
   std::uint32_t h = 12345;
@@ -332,12 +338,21 @@ TEST(PanViewTest, ErrorsAreReported) {
   o.max_azimuth_deg = -10;
   EXPECT_THROW(o.Validate(), Error);
   o = {};
-  o.resolution_deg = 0.01;  // 36000 x 11547 cells over 360° x ±30°: too many
+  o.resolution_deg = 0.01;  // 36000 x 6616 cells over 360° x ±30°: too many
   o.min_azimuth_deg = -180;
   o.max_azimuth_deg = 180;
   EXPECT_THROW(o.Validate(), Error);
-  o.max_azimuth_deg = -170;  // 1000 x 11547: fine
+  o.max_azimuth_deg = -170;  // 1000 x 6616: fine
   EXPECT_NO_THROW(o.Validate());
+  o = {};
+  o.resolution_deg = 10;  // no column: 1e-9° of azimuth at 10° a cell
+  o.min_azimuth_deg = 0;
+  o.max_azimuth_deg = 1e-9;
+  EXPECT_THROW(o.Validate(), Error);
+  o = {};
+  o.max_elevation_deg = 1e-9;  // no row
+  o.resolution_deg = 10;
+  EXPECT_THROW(o.Validate(), Error);
   std::vector<MetricFrame> frames(1);
   frames[0].radial_distance_m = Image<float>(4, 4, 1.0f);
   try {

@@ -19,7 +19,7 @@
 
 namespace tofcam {
 
-/// Most cells a panorama may have (e.g. 0.02° over 180° x ±30°: 10.4 million).
+/// Most cells a panorama may have (e.g. 0.02° over 180° x ±30°: 9000 x 3308 = 29.8 million).
 inline constexpr double kMaxPanoramaCells = 5e7;
 
 /// Panorama geometry: a cylinder of radius 1 around the pan axis through the rotation centre,
@@ -39,8 +39,8 @@ struct PanViewOptions {
   double max_azimuth_deg = 90.0;    ///< Left edge, degrees; > min_azimuth_deg, <= 180.
   double max_elevation_deg = 30.0;  ///< Strip spans ±this elevation, degrees; (0, 80].
   FalseColorOptions color;          ///< Colour law; far_m = 0 uses L of the first frame.
-  /// Throws Error(kInvalidArgument) for an option outside its range or a strip of more than
-  /// kMaxPanoramaCells cells.
+  /// Throws Error(kInvalidArgument) for an option outside its range or a strip of no cell or of
+  /// more than kMaxPanoramaCells cells.
   void Validate() const;
 };
 
@@ -86,8 +86,8 @@ struct PanView {
 
 /// The same into `view`, reusing its storage (cloud, panorama images) when a previous view of
 /// the same strip is passed in: a loop that assembles a view per sweep allocates nothing once
-/// the sizes are stable. Every field is overwritten. Throws like MakePanView; after a throw
-/// `view` holds no usable result.
+/// the sizes are stable. Every field is overwritten. Throws like MakePanView, before touching
+/// `view` (an Error leaves it as it was).
 void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
                      const PanViewOptions& options, PanView& view);
 
