@@ -148,9 +148,7 @@ struct Scratch {
   }
 };
 
-using F8 = float __attribute__((vector_size(32)));
 using I8 = std::int32_t __attribute__((vector_size(32)));
-using H8 = std::uint16_t __attribute__((vector_size(16)));
 
 // kPack for the 8-bit mask m: the positions of m's set bits in ascending order (then zeros),
 // i.e. the permutation that moves the kept lanes of a block of eight to its front, as 32-bit
@@ -178,29 +176,23 @@ constexpr PackTable MakePackTable() {
 }
 constexpr PackTable kPack = MakePackTable();
 
-// Packs the kept elements of one channel: block j of eight (masks[j], bit b = element b kept)
-// has its lanes permuted so that the kept ones come first, all eight are stored at the end,
-// which then advances by the number kept (the rest is overwritten by the next block or lies
-// beyond the cloud's final size). One channel per call keeps every pointer in a register.
-TOFCAM_HOT_LOOP void PackFloats(std::size_t blocks, const std::uint8_t* __restrict masks,
-                                const float* __restrict src, float* __restrict dst) {
+// Packs the kept elements of one channel of T (float or 16-bit flags): block j of eight
+// (masks[j], bit b = element b kept) has its lanes permuted by `table[masks[j]]` (lane indices
+// of T's width) so that the kept ones come first, all eight are stored at the end, which then
+// advances by the number kept (the rest is overwritten by the next block or lies beyond the
+// cloud's final size). One channel per call keeps every pointer in a register.
+template <typename T, typename Index>
+TOFCAM_HOT_LOOP void PackChannel(std::size_t blocks, const std::uint8_t* __restrict masks,
+                                 const Index (*table)[8], const T* __restrict src,
+                                 T* __restrict dst) {
+  // typedef: GCC drops vector_size on a dependent type in a using-declaration.
+  typedef T Vec __attribute__((vector_size(8 * sizeof(T))));
+  typedef Index IndexVec __attribute__((vector_size(8 * sizeof(Index))));
+  static_assert(sizeof(T) == sizeof(Index));
   for (std::size_t j = 0; j < blocks; ++j) {
-    I8 idx;
-    std::memcpy(&idx, kPack.idx32[masks[j]], sizeof idx);
-    F8 v;
-    std::memcpy(&v, src + 8 * j, sizeof v);
-    v = __builtin_shuffle(v, idx);
-    std::memcpy(dst, &v, sizeof v);
-    dst += kPack.count[masks[j]];
-  }
-}
-
-TOFCAM_HOT_LOOP void PackFlags(std::size_t blocks, const std::uint8_t* __restrict masks,
-                               const std::uint16_t* __restrict src, std::uint16_t* __restrict dst) {
-  for (std::size_t j = 0; j < blocks; ++j) {
-    H8 idx;
-    std::memcpy(&idx, kPack.idx16[masks[j]], sizeof idx);
-    H8 v;
+    IndexVec idx;
+    std::memcpy(&idx, table[masks[j]], sizeof idx);
+    Vec v;
     std::memcpy(&v, src + 8 * j, sizeof v);
     v = __builtin_shuffle(v, idx);
     std::memcpy(dst, &v, sizeof v);
@@ -234,8 +226,8 @@ std::size_t AppendPoints(std::size_t n, bool keep_all, const float* bx, const fl
     masks[j] = static_cast<std::uint8_t>((word * 0x0102040810204080ull) >> 56);
     kept += kPack.count[masks[j]];
   }
-  for (int k = 0; k < 6; ++k) PackFloats(blocks, masks, src[k], o[k] + n_out);
-  PackFlags(blocks, masks, f, of + n_out);
+  for (int k = 0; k < 6; ++k) PackChannel(blocks, masks, kPack.idx32, src[k], o[k] + n_out);
+  PackChannel(blocks, masks, kPack.idx16, f, of + n_out);
   n_out += kept;
   for (std::size_t i = 8 * blocks; i < n; ++i) {
     for (int k = 0; k < 6; ++k) o[k][n_out] = src[k][i];
