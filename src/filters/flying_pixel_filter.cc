@@ -6,6 +6,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "filter_internal.h"
@@ -130,10 +131,11 @@ TOFCAM_HOT_LOOP std::uint32_t DistanceCandidates(
 }
 
 // The whole rule over a row in one pass (3-min / 3-max rows lu..hv, horizontal sums nu..qv, the
-// mid row's weights cw), for rows with many candidates; ORs the flag into f and, with kEcho,
-// into echo (see FlyingPixelInto), and returns the number of pixels that passed the distance
-// conditions (to choose the next row's form).
-template <bool kEcho>
+// mid row's weights cw), for rows with many candidates; ORs the flag into f and, when echo is
+// not null, into echo (see FlyingPixelInto), and returns the number of pixels that passed the
+// distance conditions (to choose the next row's form). The loop is written once and
+// instantiated with and without the echo stores (a generic lambda rather than a template
+// function: clang cannot multiversion templates).
 TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float* __restrict lu,
                                         const float* __restrict lm, const float* __restrict lv,
                                         const float* __restrict hu, const float* __restrict hm,
@@ -145,17 +147,22 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
                                         const float* __restrict qm, const float* __restrict qv,
                                         PixelFlags* __restrict f, PixelFlags* __restrict echo) {
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
-  std::uint32_t count = 0;
-  for (int c = 0; c < w; ++c) {
-    const unsigned pass = DistancePass(lu[c], lm[c], lv[c], hu[c], hm[c], hv[c], d[c], cw[c], t);
-    count += pass;
-    const unsigned flying =
-        pass & static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
-                                                     qu[c] + qm[c] + qv[c], t));
-    f[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
-    if constexpr (kEcho) echo[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
-  }
-  return count;
+  auto rows = [&](auto with_echo) {
+    std::uint32_t count = 0;
+    for (int c = 0; c < w; ++c) {
+      const unsigned pass = DistancePass(lu[c], lm[c], lv[c], hu[c], hm[c], hv[c], d[c], cw[c], t);
+      count += pass;
+      const unsigned flying =
+          pass & static_cast<unsigned>(ContrastAtLeast(nu[c] + nm[c] + nv[c], su[c] + sm[c] + sv[c],
+                                                       qu[c] + qm[c] + qv[c], t));
+      f[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
+      if constexpr (decltype(with_echo)::value) {
+        echo[c] |= PixelFlags(static_cast<std::uint16_t>(flying * bit));
+      }
+    }
+    return count;
+  };
+  return echo != nullptr ? rows(std::true_type{}) : rows(std::false_type{});
 }
 
 // The amplitude contrast test of one candidate at column c (rows u, m, v of prepared weights and
@@ -185,7 +192,7 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   s.sums.assign(4 * 3 * sw, 0.0f);  // the neutral slot's sums stay 0
   s.candidate.assign((sw + 7) / 8 * 8, 0);
   // Without an echo image the sparse rows echo into a scratch row nobody reads (the dense rows
-  // skip the echo: DecideRow<false>).
+  // skip the echo).
   s.echo_sink.resize(sw);
   // Slot k in 0..3 (3 = neutral); pointers at column 0 of the padded rows.
   auto prepared = [&](int k) {
@@ -250,11 +257,9 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       const float* nm = sums(km, r);
       const float* nv = sums(kv, r + 1);
       const std::size_t count =
-          (echo != nullptr ? DecideRow<true>
-                           : DecideRow<false>)(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku),
-                                               hi_of(km), hi_of(kv), d, m.w, nu, nm, nv, nu + sw,
-                                               nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw,
-                                               nv + 2 * sw, f, e);
+          DecideRow(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv), d, m.w,
+                    nu, nm, nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw, nv + 2 * sw, f,
+                    echo != nullptr ? e : nullptr);
       dense = 16 * count > sw;
     };
     if (dense) {

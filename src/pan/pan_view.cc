@@ -30,12 +30,13 @@ constexpr std::size_t kChunk = 4096;
 // MakePointCloud) moved into the base frame (r * p + t, the same float operations as
 // TransformPointCloud), whether it is valid (no reject flag, finite), and its squared distance
 // from the rotation centre in double (each square exact, two roundings): the z-buffer's key.
-[[gnu::noinline]] TOFCAM_HOT_LOOP void BasePoints(
-    std::size_t n, const float* __restrict d, const std::uint16_t* __restrict flags,
-    std::uint16_t nan_mask, const float* __restrict rx, const float* __restrict ry,
-    const float* __restrict rz, const float* __restrict r, const float* __restrict t,
-    float* __restrict bx, float* __restrict by, float* __restrict bz,
-    std::uint8_t* __restrict valid, double* __restrict range2) {
+TOFCAM_HOT_LOOP void BasePoints(std::size_t n, const float* __restrict d,
+                                const std::uint16_t* __restrict flags, std::uint16_t nan_mask,
+                                const float* __restrict rx, const float* __restrict ry,
+                                const float* __restrict rz, const float* __restrict r,
+                                const float* __restrict t, float* __restrict bx,
+                                float* __restrict by, float* __restrict bz,
+                                std::uint8_t* __restrict valid, double* __restrict range2) {
   constexpr float kMax = std::numeric_limits<float>::max();
   for (std::size_t i = 0; i < n; ++i) {
     const bool keep = (static_cast<unsigned>((flags[i] & nan_mask) == 0) &
@@ -48,8 +49,11 @@ constexpr std::size_t kChunk = 4096;
     bx[i] = px;
     by[i] = py;
     bz[i] = pz;
-    const bool finite = (std::abs(px) <= kMax) & (std::abs(py) <= kMax) & (std::abs(pz) <= kMax);
-    valid[i] = static_cast<std::uint8_t>(((flags[i] & kRejectMask) == 0) & finite);
+    const unsigned finite = static_cast<unsigned>(std::abs(px) <= kMax) &
+                            static_cast<unsigned>(std::abs(py) <= kMax) &
+                            static_cast<unsigned>(std::abs(pz) <= kMax);
+    valid[i] =
+        static_cast<std::uint8_t>(static_cast<unsigned>((flags[i] & kRejectMask) == 0) & finite);
     const double dx = px, dy = py, dz = pz;
     range2[i] = dx * dx + dy * dy + dz * dz;
   }
@@ -81,11 +85,9 @@ struct FloatStrip {
 // less, so the bounds hold for every clone and every clone gives ExactCell's cells. The AVX-512
 // clone: 8 % (SR-2) to 13 % (1 MP) faster assembly on Zen 4; with 16 registers the AVX2 one
 // spills.
-[[gnu::noinline]] TOFCAM_HOT_LOOP_WIDE void FastCells(std::size_t n, const FloatStrip& s,
-                                                      const float* __restrict x,
-                                                      const float* __restrict y,
-                                                      const float* __restrict z,
-                                                      std::int32_t* __restrict cell) {
+TOFCAM_HOT_LOOP_WIDE void FastCells(std::size_t n, const FloatStrip& s, const float* __restrict x,
+                                    const float* __restrict y, const float* __restrict z,
+                                    std::int32_t* __restrict cell) {
   const FloatStrip k = s;
   const std::int32_t stride = static_cast<std::int32_t>(s.cols);
   for (std::size_t i = 0; i < n; ++i) {
@@ -117,9 +119,8 @@ struct FloatStrip {
 
 // Invalid points get kNoCell; returns how many valid ones FastCells left to recheck. Apart from
 // FastCells: with bytes in its loop GCC would unroll it four vectors deep and spill.
-[[gnu::noinline]] TOFCAM_HOT_LOOP std::uint32_t MaskInvalid(std::size_t n,
-                                                            const std::uint8_t* __restrict valid,
-                                                            std::int32_t* __restrict cell) {
+TOFCAM_HOT_LOOP std::uint32_t MaskInvalid(std::size_t n, const std::uint8_t* __restrict valid,
+                                          std::int32_t* __restrict cell) {
   std::uint32_t rechecks = 0;  // 32 bits: GCC vectorises the count (n < 2^32 here)
   for (std::size_t i = 0; i < n; ++i) {
     const std::int32_t c = valid[i] != 0 ? cell[i] : internal::kNoCell;
@@ -182,9 +183,10 @@ constexpr PackTable kPack = MakePackTable();
 // advances by the number kept (the rest is overwritten by the next block or lies beyond the
 // cloud's final size). One channel per call keeps every pointer in a register.
 template <typename T, typename Index>
-TOFCAM_HOT_LOOP void PackChannel(std::size_t blocks, const std::uint8_t* __restrict masks,
-                                 const Index (*table)[8], const T* __restrict src,
-                                 T* __restrict dst) {
+[[gnu::always_inline]] inline void PackChannel(std::size_t blocks,
+                                               const std::uint8_t* __restrict masks,
+                                               const Index (*table)[8], const T* __restrict src,
+                                               T* __restrict dst) {
   // typedef: GCC drops vector_size on a dependent type in a using-declaration.
   typedef T Vec __attribute__((vector_size(8 * sizeof(T))));
   typedef Index IndexVec __attribute__((vector_size(8 * sizeof(Index))));
@@ -194,10 +196,27 @@ TOFCAM_HOT_LOOP void PackChannel(std::size_t blocks, const std::uint8_t* __restr
     std::memcpy(&idx, table[masks[j]], sizeof idx);
     Vec v;
     std::memcpy(&v, src + 8 * j, sizeof v);
+#if defined(__clang__)
+    // clang has no variable-index shuffle builtin: lane by lane (it builds the fuzzers only).
+    Vec packed;
+    for (int l = 0; l < 8; ++l) packed[l] = v[idx[l]];
+    v = packed;
+#else
     v = __builtin_shuffle(v, idx);
+#endif
     std::memcpy(dst, &v, sizeof v);
     dst += kPack.count[masks[j]];
   }
+}
+
+// The clones (clang cannot multiversion templates): the body above is inlined into each.
+TOFCAM_HOT_LOOP void PackFloats(std::size_t blocks, const std::uint8_t* __restrict masks,
+                                const float* __restrict src, float* __restrict dst) {
+  PackChannel(blocks, masks, kPack.idx32, src, dst);
+}
+TOFCAM_HOT_LOOP void PackFlags(std::size_t blocks, const std::uint8_t* __restrict masks,
+                               const std::uint16_t* __restrict src, std::uint16_t* __restrict dst) {
+  PackChannel(blocks, masks, kPack.idx16, src, dst);
 }
 
 // Appends points [0, n) of one chunk (n <= kChunk) at `n_out` of the merged cloud, whose arrays
@@ -226,8 +245,8 @@ std::size_t AppendPoints(std::size_t n, bool keep_all, const float* bx, const fl
     masks[j] = static_cast<std::uint8_t>((word * 0x0102040810204080ull) >> 56);
     kept += kPack.count[masks[j]];
   }
-  for (int k = 0; k < 6; ++k) PackChannel(blocks, masks, kPack.idx32, src[k], o[k] + n_out);
-  PackChannel(blocks, masks, kPack.idx16, f, of + n_out);
+  for (int k = 0; k < 6; ++k) PackFloats(blocks, masks, src[k], o[k] + n_out);
+  PackFlags(blocks, masks, f, of + n_out);
   n_out += kept;
   for (std::size_t i = 8 * blocks; i < n; ++i) {
     for (int k = 0; k < 6; ++k) o[k][n_out] = src[k][i];
