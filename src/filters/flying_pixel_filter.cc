@@ -185,11 +185,16 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   const int w = frame.width(), h = frame.height();
   constexpr float kInf = std::numeric_limits<float>::infinity();
   const std::size_t sw = static_cast<std::size_t>(w);
-  const std::size_t pw = sw + 2;
+  // Stream strides: each scratch stream (a padded prepared row; a min, max or sum row) starts
+  // 64 bytes further into the 4 KiB page than the one before, whatever the width. With
+  // 1024-pixel rows a plain stride of w (+2) floats put all 36 streams, and the frame's own
+  // rows, at nearly the same page offset, where loads wait on unrelated stores (4K aliasing).
+  auto skewed = [](std::size_t n) { return (n + 15) / 16 * 16 + 16; };
+  const std::size_t pw = skewed(sw + 2), mw = skewed(sw);
   thread_local Scratch s;
   s.prepared.resize(4 * 4 * pw);
-  s.minmax.resize(4 * 2 * sw);
-  s.sums.assign(4 * 3 * sw, 0.0f);  // the neutral slot's sums stay 0
+  s.minmax.resize(4 * 2 * mw);
+  s.sums.assign(4 * 3 * mw, 0.0f);  // the neutral slot's sums stay 0
   s.candidate.assign((sw + 7) / 8 * 8, 0);
   // Without an echo image the sparse rows echo into a scratch row nobody reads (the dense rows
   // skip the echo).
@@ -199,8 +204,8 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
     float* base = s.prepared.data() + static_cast<std::size_t>(k) * 4 * pw + 1;
     return Prepared{base, base + pw, base + 2 * pw, base + 3 * pw};
   };
-  auto lo_of = [&](int k) { return s.minmax.data() + static_cast<std::size_t>(k) * 2 * sw; };
-  auto hi_of = [&](int k) { return lo_of(k) + sw; };
+  auto lo_of = [&](int k) { return s.minmax.data() + static_cast<std::size_t>(k) * 2 * mw; };
+  auto hi_of = [&](int k) { return lo_of(k) + mw; };
   for (int k = 0; k < 4; ++k) {
     const Prepared p = prepared(k);
     // Pads (and the whole neutral row): weight 0, amplitude 0, distances that never win.
@@ -216,14 +221,14 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   std::fill(lo_of(3), lo_of(3) + sw, kInf);
   std::fill(hi_of(3), hi_of(3) + sw, -kInf);
   const PixelFlags* prior_px = PriorOrZeros(prior, frame.radial_distance_m.size());
-  auto sums_of = [&](int k) { return s.sums.data() + static_cast<std::size_t>(k) * 3 * sw; };
+  auto sums_of = [&](int k) { return s.sums.data() + static_cast<std::size_t>(k) * 3 * mw; };
   int sums_row[3] = {-1, -1, -1};  // the row whose sums slot k holds
   // Slot k's sums for row r (k = 3: the neutral row), computed once per row when first needed.
   auto sums = [&](int k, int r) {
     float* n = sums_of(k);
     if (k != 3 && sums_row[k] != r) {
       const Prepared p = prepared(k);
-      HorizontalSums(w, p.w, p.a, n, n + sw, n + 2 * sw);
+      HorizontalSums(w, p.w, p.a, n, n + mw, n + 2 * mw);
       sums_row[k] = r;
     }
     return n;
@@ -258,7 +263,7 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       const float* nv = sums(kv, r + 1);
       const std::size_t count =
           DecideRow(w, t, lo_of(ku), lo_of(km), lo_of(kv), hi_of(ku), hi_of(km), hi_of(kv), d, m.w,
-                    nu, nm, nv, nu + sw, nm + sw, nv + sw, nu + 2 * sw, nm + 2 * sw, nv + 2 * sw, f,
+                    nu, nm, nv, nu + mw, nm + mw, nv + mw, nu + 2 * mw, nm + 2 * mw, nv + 2 * mw, f,
                     echo != nullptr ? e : nullptr);
       dense = 16 * count > sw;
     };
