@@ -130,7 +130,7 @@ TOFCAM_HOT_LOOP std::uint32_t MaskInvalid(std::size_t n, const std::uint8_t* __r
   return rechecks;
 }
 
-// Reused per-chunk buffers of MakePanView (sized for one chunk).
+// Reused buffers of MakePanView: per chunk, except the stand-ins for missing channels (per frame).
 struct Scratch {
   std::vector<float> bx, by, bz;
   std::vector<double> range2, key;
@@ -148,8 +148,6 @@ struct Scratch {
     cell.resize(n);
   }
 };
-
-using I8 = std::int32_t __attribute__((vector_size(32)));
 
 // kPack for the 8-bit mask m: the positions of m's set bits in ascending order (then zeros),
 // i.e. the permutation that moves the kept lanes of a block of eight to its front, as 32-bit
