@@ -14,8 +14,14 @@ void ValidateFrame(const Frame& frame, const std::string& what) {
     throw Error(ErrorCode::kInvalidArgument,
                 what + ": distance, amplitude and intensity images differ in size");
   }
+  const auto same_or_empty = [w, h](const Image<float>& image) {
+    return image.empty() || image.SameSize(w, h);
+  };
   if (frame.truth &&
-      (!frame.truth->radial_distance_m.SameSize(w, h) || !frame.truth->causes.SameSize(w, h))) {
+      (!frame.truth->radial_distance_m.SameSize(w, h) || !frame.truth->causes.SameSize(w, h) ||
+       !same_or_empty(frame.truth->sigma_m) || !same_or_empty(frame.truth->footprint_near_m) ||
+       !frame.truth->footprint_far_m.SameSize(frame.truth->footprint_near_m.width(),
+                                              frame.truth->footprint_near_m.height()))) {
     throw Error(ErrorCode::kInvalidArgument, what + ": ground truth differs in size from frame");
   }
   if (!frame.source_flags.empty() && !frame.source_flags.SameSize(w, h)) {

@@ -84,69 +84,97 @@ class CeilingF1 {
   std::array<long long, kBins> count_{}, bad_{};
 };
 
-// Pooled confusion of one method: a pixel is bad when it sees nothing, has no finite distance or
-// is more than 5 cm from the truth; rejected when any reject bit is set (camera's or filters').
-struct Score {
-  long long pixels = 0, bad = 0, rejected = 0, rejected_bad = 0, kept_bad = 0;
+// Confusion of the rejections against one definition of a bad pixel, and the error of the kept
+// pixels whose surface lies within L.
+struct Tally {
+  long long bad = 0, rejected_bad = 0, kept_bad = 0, kept_in_range = 0;
   double kept_sq_in_range = 0;
-  long long kept_in_range = 0;
-  long long beyond = 0, beyond_right = 0;  // surfaces beyond L at 20 MHz; kept within 5 cm
-  long long frames = 0;
-  double seconds = 0;
   CeilingF1 ceiling;
 
-  // `sigma_m`: the simulator's σ of each delivered distance (see CeilingF1).
-  void Add(const MetricFrame& f, const Image<float>& sigma_m, double range_m) {
-    ++frames;
-    for (std::size_t i = 0; i < f.flags.size(); ++i) {
-      const double truth = f.truth->radial_distance_m[i];
-      const double e = static_cast<double>(f.radial_distance_m[i]) - truth;
-      const bool no_return = !std::isfinite(truth) || f.truth->causes[i].Has(Flag::kNoReturn);
-      const bool is_bad = no_return || !(std::abs(e) <= kBadErrorM);
-      const bool is_rejected = f.flags[i].Any(kRejectMask);
-      const bool systematic = no_return || (f.truth->causes[i].bits() & kTruthMask) != 0;
-      const double sigma = sigma_m[i];
-      ceiling.Add(systematic || !(sigma > 0.0) ? (is_bad ? 1.0 : 0.0)
-                                               : std::erfc(kBadErrorM / (sigma * std::sqrt(2.0))),
-                  is_bad);
-      ++pixels;
-      bad += is_bad;
-      rejected += is_rejected;
-      rejected_bad += is_rejected && is_bad;
-      kept_bad += !is_rejected && is_bad;
-      const bool beyond_range = std::isfinite(truth) && truth >= range_m;
-      beyond += beyond_range;
-      beyond_right += beyond_range && !is_rejected && !is_bad;
-      if (!is_rejected && std::isfinite(e) && !beyond_range) {
-        kept_sq_in_range += e * e;
-        ++kept_in_range;
-      }
+  void Add(bool is_bad, bool is_rejected, bool systematic, double sigma, bool in_range, double e) {
+    ceiling.Add(systematic || !(sigma > 0.0) ? (is_bad ? 1.0 : 0.0)
+                                             : std::erfc(kBadErrorM / (sigma * std::sqrt(2.0))),
+                is_bad);
+    bad += is_bad;
+    rejected_bad += is_rejected && is_bad;
+    kept_bad += !is_rejected && is_bad;
+    if (!is_rejected && std::isfinite(e) && in_range) {
+      kept_sq_in_range += e * e;
+      ++kept_in_range;
     }
   }
-  [[nodiscard]] double Precision() const { return Ratio(rejected_bad, rejected); }
+  void Merge(const Tally& o) {
+    bad += o.bad;
+    rejected_bad += o.rejected_bad;
+    kept_bad += o.kept_bad;
+    kept_in_range += o.kept_in_range;
+    kept_sq_in_range += o.kept_sq_in_range;
+    ceiling.Merge(o.ceiling);
+  }
+  [[nodiscard]] double Precision(long long rejected) const { return Ratio(rejected_bad, rejected); }
   [[nodiscard]] double Recall() const { return Ratio(rejected_bad, bad); }
-  [[nodiscard]] double F1() const {
+  [[nodiscard]] double F1(long long rejected) const {
     const long long fp = rejected - rejected_bad;
     const long long denominator = 2 * rejected_bad + fp + kept_bad;
     return denominator ? 2.0 * rejected_bad / denominator : kNaN;
   }
+  [[nodiscard]] double RmseInRange() const {
+    return kept_in_range ? std::sqrt(kept_sq_in_range / kept_in_range) : kNaN;
+  }
+};
+
+// Pooled score of one method: a pixel is bad when it sees nothing, has no finite distance or
+// is more than 5 cm from the truth; rejected when any reject bit is set (camera's or filters').
+// Two truths: the central ray's surface (`central`) and the footprint's (`footprint`, see
+// FootprintErrorM in tofcam/pipeline/frame_stats.h; there "sees nothing" means no ray of the
+// footprint hits).
+struct Score {
+  long long pixels = 0, rejected = 0;
+  long long beyond = 0, beyond_right = 0;  // surfaces beyond L at 20 MHz; kept within 5 cm
+  long long frames = 0;
+  double seconds = 0;
+  Tally central, footprint;
+
+  // `sigma_m`: the simulator's σ of each delivered distance (see CeilingF1).
+  void Add(const MetricFrame& f, const Image<float>& sigma_m, double range_m) {
+    ++frames;
+    const GroundTruth& t = *f.truth;
+    const bool has_footprint = !t.footprint_near_m.empty();
+    for (std::size_t i = 0; i < f.flags.size(); ++i) {
+      const double truth = t.radial_distance_m[i];
+      const double d = f.radial_distance_m[i];
+      const double e = d - truth;
+      const bool no_return = !std::isfinite(truth) || t.causes[i].Has(Flag::kNoReturn);
+      const bool is_bad = no_return || !(std::abs(e) <= kBadErrorM);
+      const bool is_rejected = f.flags[i].Any(kRejectMask);
+      const bool systematic = no_return || (t.causes[i].bits() & kTruthMask) != 0;
+      const bool beyond_range = std::isfinite(truth) && truth >= range_m;
+      ++pixels;
+      rejected += is_rejected;
+      beyond += beyond_range;
+      beyond_right += beyond_range && !is_rejected && !is_bad;
+      central.Add(is_bad, is_rejected, systematic, sigma_m[i], !beyond_range, e);
+      const double e_footprint =
+          has_footprint ? FootprintErrorM(d, truth, t.footprint_near_m[i], t.footprint_far_m[i])
+                        : std::abs(e);
+      footprint.Add(!(e_footprint <= kBadErrorM), is_rejected, systematic, sigma_m[i],
+                    !beyond_range, e_footprint);
+    }
+  }
   void Merge(const Score& o) {
     pixels += o.pixels;
-    bad += o.bad;
     rejected += o.rejected;
-    rejected_bad += o.rejected_bad;
-    kept_bad += o.kept_bad;
-    kept_sq_in_range += o.kept_sq_in_range;
-    kept_in_range += o.kept_in_range;
     beyond += o.beyond;
     beyond_right += o.beyond_right;
     frames += o.frames;
     seconds += o.seconds;
-    ceiling.Merge(o.ceiling);
+    central.Merge(o.central);
+    footprint.Merge(o.footprint);
   }
-  [[nodiscard]] double RmseInRange() const {
-    return kept_in_range ? std::sqrt(kept_sq_in_range / kept_in_range) : kNaN;
-  }
+  [[nodiscard]] double Precision() const { return central.Precision(rejected); }
+  [[nodiscard]] double Recall() const { return central.Recall(); }
+  [[nodiscard]] double F1() const { return central.F1(rejected); }
+  [[nodiscard]] double RmseInRange() const { return central.RmseInRange(); }
 };
 
 // One method's closed loop on one scene: the frames it scores are the last ones of a static
@@ -240,7 +268,8 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
   std::vector<Score> pooled(methods.size());
   Table per_scene{"beyond_scenes",
                   {"scene", "method", "frames", "F1 (5 cm)", "per-pixel ceiling F1", "precision",
-                   "recall", "kept", "RMSE kept within L", "beyond-L pixels kept right"},
+                   "recall", "kept", "RMSE kept within L", "beyond-L pixels kept right",
+                   "F1, footprint truth", "RMSE kept within L, footprint truth"},
                   {},
                   false};
   int scene_index = 0;
@@ -273,13 +302,17 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
       }
       const Score score = RunMethod(m, scene, 700 + scene_index, p, o);
       pooled[k].Merge(score);
-      per_scene.rows.push_back({scene, m.name, I(score.frames), F(score.F1(), 3),
-                                m.smoothing ? "-" : F(score.ceiling.Best(), 3),
-                                F(score.Precision(), 3), F(score.Recall(), 3),
-                                Pct(Ratio(score.pixels - score.rejected, score.pixels)),
-                                Mm(score.RmseInRange()),
-                                score.beyond ? Pct(Ratio(score.beyond_right, score.beyond)) : "-"});
+      per_scene.rows.push_back(
+          {scene, m.name, I(score.frames), F(score.F1(), 3),
+           m.smoothing ? "-" : F(score.central.ceiling.Best(), 3), F(score.Precision(), 3),
+           F(score.Recall(), 3), Pct(Ratio(score.pixels - score.rejected, score.pixels)),
+           Mm(score.RmseInRange()),
+           score.beyond ? Pct(Ratio(score.beyond_right, score.beyond)) : "-",
+           F(score.footprint.F1(score.rejected), 3), Mm(score.footprint.RmseInRange())});
       r.metrics[scene + "." + m.name + ".f1"] = score.F1();
+      r.metrics[scene + "." + m.name + ".footprint_f1"] = score.footprint.F1(score.rejected);
+      r.metrics[scene + "." + m.name + ".footprint_rmse_kept_within_l"] =
+          score.footprint.RmseInRange();
     }
     ++scene_index;
   }
@@ -292,22 +325,45 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
     const Score& c = pooled[k];
     const std::string& name = methods[k].name;
     const long long kept = c.pixels - c.rejected;
-    summary.rows.push_back({name, F(c.F1(), 3), methods[k].smoothing ? "-" : F(c.ceiling.Best(), 3),
-                            F(c.Precision(), 3), F(c.Recall(), 3), Pct(Ratio(kept, c.pixels)),
-                            Pct(Ratio(c.kept_bad, kept)), Mm(c.RmseInRange()),
-                            Pct(Ratio(c.beyond_right, c.beyond)),
-                            F(1e3 * c.seconds / std::max(1LL, c.frames), 3)});
+    summary.rows.push_back(
+        {name, F(c.F1(), 3), methods[k].smoothing ? "-" : F(c.central.ceiling.Best(), 3),
+         F(c.Precision(), 3), F(c.Recall(), 3), Pct(Ratio(kept, c.pixels)),
+         Pct(Ratio(c.central.kept_bad, kept)), Mm(c.RmseInRange()),
+         Pct(Ratio(c.beyond_right, c.beyond)), F(1e3 * c.seconds / std::max(1LL, c.frames), 3)});
     r.metrics[name + ".f1"] = c.F1();
-    if (!methods[k].smoothing) r.metrics[name + ".ceiling_f1"] = c.ceiling.Best();
+    if (!methods[k].smoothing) r.metrics[name + ".ceiling_f1"] = c.central.ceiling.Best();
     r.metrics[name + ".precision"] = c.Precision();
     r.metrics[name + ".recall"] = c.Recall();
     r.metrics[name + ".kept"] = Ratio(kept, c.pixels);
-    r.metrics[name + ".kept_bad_fraction"] = Ratio(c.kept_bad, kept);
+    r.metrics[name + ".kept_bad_fraction"] = Ratio(c.central.kept_bad, kept);
     r.metrics[name + ".rmse_kept_within_l"] = c.RmseInRange();
     r.metrics[name + ".beyond_right"] = Ratio(c.beyond_right, c.beyond);
     r.metrics[name + ".frames"] = static_cast<double>(c.frames);
   }
+  // The same rejections scored against the footprint truth (FootprintErrorM).
+  Table footprint{"beyond_footprint",
+                  {"method", "F1 (5 cm), footprint truth", "per-pixel ceiling F1", "precision",
+                   "recall", "bad among kept", "RMSE kept within L", "F1 (5 cm), central truth"},
+                  {},
+                  true};
+  for (std::size_t k = 0; k < methods.size(); ++k) {
+    const Score& c = pooled[k];
+    const Tally& t = c.footprint;
+    const std::string& name = methods[k].name;
+    const long long kept = c.pixels - c.rejected;
+    footprint.rows.push_back({name, F(t.F1(c.rejected), 3),
+                              methods[k].smoothing ? "-" : F(t.ceiling.Best(), 3),
+                              F(t.Precision(c.rejected), 3), F(t.Recall(), 3),
+                              Pct(Ratio(t.kept_bad, kept)), Mm(t.RmseInRange()), F(c.F1(), 3)});
+    r.metrics[name + ".footprint_f1"] = t.F1(c.rejected);
+    if (!methods[k].smoothing) r.metrics[name + ".footprint_ceiling_f1"] = t.ceiling.Best();
+    r.metrics[name + ".footprint_precision"] = t.Precision(c.rejected);
+    r.metrics[name + ".footprint_recall"] = t.Recall();
+    r.metrics[name + ".footprint_kept_bad_fraction"] = Ratio(t.kept_bad, kept);
+    r.metrics[name + ".footprint_rmse_kept_within_l"] = t.RmseInRange();
+  }
   r.tables.push_back(summary);
+  r.tables.push_back(footprint);
   r.tables.push_back(per_scene);
 
   const auto metric = [&](std::size_t k, const std::string& key) {
@@ -356,8 +412,41 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << ": where it is below 0.9, no confidence measure alone reaches the issue's target on "
           "those frames; only frames with less noise (longer or more exposures, averaging, "
           "denoising) can.";
+  // Scenes where the full set's kept pixels meet the RMSE target under the footprint truth.
+  int scenes_with_kept = 0, scenes_met = 0;
+  std::string worst_scene;
+  double worst = 0.0;
+  for (const std::string& scene : scenes) {
+    const double rmse = r.metrics[scene + "." + methods[5].name + ".footprint_rmse_kept_within_l"];
+    if (!std::isfinite(rmse)) continue;
+    ++scenes_with_kept;
+    scenes_met += rmse <= 0.05;
+    if (rmse > worst) {
+      worst = rmse;
+      worst_scene = scene;
+    }
+  }
+  text << "\n\nFootprint truth (second table, `beyond_footprint.csv`): the central ray's surface "
+          "is one convention for a pixel that sees two. A pixel whose area straddles a depth "
+          "edge and reads the nearer surface (which returns more light) measures a real surface "
+          "point within half a pixel of its ray, a few mm at these distances, yet its central "
+          "ray may hit the wall metres behind: the central truth counts it metres wrong. Scored "
+          "against the nearest of the central ray's distance and the nearest and farthest "
+          "surface the simulator's subsample rays hit in the pixel's area (a reading between "
+          "the two surfaces, a flying pixel, stays wrong), the full set's F1 is "
+       << F(metric(5, "footprint_f1"), 3) << " (central " << F(metric(5, "f1"), 3)
+       << ": rejected edge pixels that read one of their two surfaces now count as false alarms) "
+          "and its RMSE of kept pixels "
+          "within L "
+       << Mm(metric(5, "footprint_rmse_kept_within_l")) << " (central "
+       << Mm(metric(5, "rmse_kept_within_l")) << "); the RMSE is at most 50 mm in " << scenes_met
+       << " of the " << scenes_with_kept << " scenes with kept pixels within L, the worst being "
+       << worst_scene << " (" << Mm(worst)
+       << "). Both truths come from the same rendering; neither was chosen for these numbers.";
   r.text = text.str();
-  for (const std::string key : {"f1", "ceiling_f1", "rmse_kept_within_l", "beyond_right", "kept"}) {
+  for (const std::string key :
+       {"f1", "ceiling_f1", "rmse_kept_within_l", "beyond_right", "kept", "footprint_f1",
+        "footprint_ceiling_f1", "footprint_rmse_kept_within_l"}) {
     r.metrics["paper." + key] = metric(0, key);
     r.metrics["vendor." + key] = metric(1, key);
     r.metrics["beyond." + key] = metric(5, key);

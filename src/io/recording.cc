@@ -111,6 +111,7 @@ struct RecordingWriter::Impl {
   std::vector<Handle> info;
   bool has_flags = false;
   bool has_truth = false;
+  bool has_footprint = false;  // truth/footprint_near_m and _far_m
   bool has_confidence = false;
   std::string frame_model;
   std::size_t count = 0;
@@ -140,6 +141,7 @@ struct RecordingWriter::Impl {
   void CreateDatasets(const Frame& first) {
     has_flags = !first.source_flags.empty();
     has_truth = first.truth.has_value();
+    has_footprint = has_truth && !first.truth->footprint_near_m.empty();
     has_confidence = !first.confidence.empty();
     frame_model = first.info.camera_model;
     images.emplace_back("distance", CreateImageDataset("distance", H5T_STD_U16LE));
@@ -156,6 +158,11 @@ struct RecordingWriter::Impl {
                           CreateImageDataset("truth/radial_distance_m", H5T_IEEE_F32LE));
       images.emplace_back("truth/causes", CreateImageDataset("truth/causes", H5T_STD_U16LE));
       images.emplace_back("truth/sigma_m", CreateImageDataset("truth/sigma_m", H5T_IEEE_F32LE));
+      if (has_footprint) {
+        for (const char* name : {"truth/footprint_near_m", "truth/footprint_far_m"}) {
+          images.emplace_back(name, CreateImageDataset(name, H5T_IEEE_F32LE));
+        }
+      }
     }
     for (int i = 0; i < kInfoCount; ++i) {
       const hsize_t dims[1] = {0};
@@ -178,6 +185,10 @@ struct RecordingWriter::Impl {
                                       &flags);
     io_internal::WriteScalarAttribute(path, file.get(), "has_frame_truth", H5T_NATIVE_UINT8,
                                       &truth);
+    // Absent in files written before the footprint existed: read as "none".
+    const std::uint8_t footprint = has_footprint ? 1 : 0;
+    io_internal::WriteScalarAttribute(path, file.get(), "has_truth_footprint", H5T_NATIVE_UINT8,
+                                      &footprint);
     io_internal::WriteStringAttribute(path, file.get(), "frame_camera_model", frame_model);
     // Absent in files written before the confidence channel existed: read as "none".
     const std::uint8_t confidence = has_confidence ? 1 : 0;
@@ -290,14 +301,19 @@ void RecordingWriter::Append(const Frame& frame) {
   if (!frame.source_flags.empty() && !frame.source_flags.SameSize(frame.distance)) {
     throw Error(ErrorCode::kMismatch, m.path.string() + ": source_flags size differs from frame");
   }
+  // ValidateFrame checked every channel's size; a recording also needs the truth's σ.
+  if (frame.truth && frame.truth->sigma_m.empty()) {
+    throw Error(ErrorCode::kMismatch, m.path.string() + ": ground truth without sigma_m");
+  }
   Hdf5Silencer silence;
   if (m.count == 0) m.CreateDatasets(frame);
   if (m.has_flags == frame.source_flags.empty() || m.has_truth != frame.truth.has_value() ||
-      m.has_confidence == frame.confidence.empty()) {
+      m.has_confidence == frame.confidence.empty() ||
+      (m.has_truth && m.has_footprint == frame.truth->footprint_near_m.empty())) {
     throw Error(ErrorCode::kMismatch,
                 m.path.string() +
-                    ": every frame of a recording must have source flags, confidence and ground "
-                    "truth iff the first frame had them");
+                    ": every frame of a recording must have source flags, confidence, ground "
+                    "truth and its footprint iff the first frame had them");
   }
   if (frame.info.camera_model != m.frame_model) {
     throw Error(ErrorCode::kMismatch, m.path.string() + ": frame camera model '" +
@@ -325,6 +341,12 @@ void RecordingWriter::Append(const Frame& frame) {
     write_u16(t.causes.data());
     auto& [n2, d2] = next();
     m.AppendRow(d2.get(), n2, H5T_NATIVE_FLOAT, t.sigma_m.data());
+    if (m.has_footprint) {
+      for (const Image<float>* image : {&t.footprint_near_m, &t.footprint_far_m}) {
+        auto& [name, d] = next();
+        m.AppendRow(d.get(), name, H5T_NATIVE_FLOAT, image->data());
+      }
+    }
   }
   const FrameInfo& fi = frame.info;
   const std::uint64_t sequence = fi.sequence;
@@ -378,7 +400,8 @@ struct RecordingReader::Impl {
   std::size_t count = 0;
   std::vector<FrameInfo> infos;
   Handle distance, amplitude, intensity, flags, confidence, truth_distance, truth_causes,
-      truth_sigma;
+      truth_sigma, truth_near, truth_far;
+  bool has_footprint = false;
   std::string confidence_source;
 
   template <typename T>
@@ -502,6 +525,14 @@ struct RecordingReader::Impl {
       n = std::min(n, OpenImage(truth_distance, "truth/radial_distance_m", H5T_FLOAT, 4));
       n = std::min(n, OpenImage(truth_causes, "truth/causes", H5T_INTEGER, 2));
       n = std::min(n, OpenImage(truth_sigma, "truth/sigma_m", H5T_FLOAT, 4));
+      std::uint8_t footprint = 0;
+      io_internal::ReadScalarAttribute(path, file.get(), "has_truth_footprint", H5T_NATIVE_UINT8,
+                                       &footprint);
+      has_footprint = footprint != 0;
+      if (has_footprint) {
+        n = std::min(n, OpenImage(truth_near, "truth/footprint_near_m", H5T_FLOAT, 4));
+        n = std::min(n, OpenImage(truth_far, "truth/footprint_far_m", H5T_FLOAT, 4));
+      }
     }
     // Per-frame info, read whole and validated once.
     std::vector<std::vector<double>> columns(kInfoCount);
@@ -645,6 +676,20 @@ Frame RecordingReader::Read(std::size_t index) const {
       if (std::isnan(t.radial_distance_m[i]) || !(t.sigma_m[i] >= 0) || std::isinf(t.sigma_m[i])) {
         Fail(ErrorCode::kFormat, m.path,
              "ground truth of frame " + std::to_string(index) + " has NaN or negative values");
+      }
+    }
+    if (m.has_footprint) {
+      m.ReadImage(m.truth_near, "truth/footprint_near_m", H5T_NATIVE_FLOAT, index,
+                  t.footprint_near_m);
+      m.ReadImage(m.truth_far, "truth/footprint_far_m", H5T_NATIVE_FLOAT, index, t.footprint_far_m);
+      for (std::size_t i = 0; i < t.footprint_near_m.size(); ++i) {
+        const float near = t.footprint_near_m[i], far = t.footprint_far_m[i];
+        // Both +inf (nothing hit) or 0 <= near <= far < inf.
+        if (!(near >= 0 && near <= far) || (std::isinf(far) && !std::isinf(near))) {
+          Fail(ErrorCode::kFormat, m.path,
+               "ground-truth footprint of frame " + std::to_string(index) +
+                   " is not 0 <= near <= far (or both +inf)");
+        }
       }
     }
     frame.truth = std::move(t);

@@ -139,6 +139,15 @@ void FrameStatsOptions::Validate() const {
   }
 }
 
+double FootprintErrorM(double measured_m, double truth_m, double near_m, double far_m) noexcept {
+  double e = std::numeric_limits<double>::infinity();
+  for (const double x : {truth_m, near_m, far_m}) {
+    const double candidate = std::abs(measured_m - x);
+    if (std::isfinite(x) && candidate < e) e = candidate;  // false for a NaN measurement
+  }
+  return e;
+}
+
 FrameStats ComputeFrameStats(const MetricFrame& frame, const FrameStatsOptions& options) {
   options.Validate();
   const Image<float>& distance = frame.radial_distance_m;

@@ -16,14 +16,15 @@ namespace {
 constexpr double kPlanckJs = 6.62607015e-34;
 
 // Per pixel of a row: the sums of its S^2 subsamples (phasor, DC = active + background), in
-// subsample order, and the span of the subsample distances (inf when some but not all miss, 0
-// when all miss). Blocks of G pixels as in PixelRays::Index(); G is a compile-time constant so the
-// inner loops become vector operations.
+// subsample order, the span of the subsample distances (inf when some but not all miss, 0
+// when all miss) and the nearest and farthest hit (inf and 0 when all miss). Blocks of G pixels as
+// in PixelRays::Index(); G is a compile-time constant so the inner loops become vector operations.
 template <int G>
 void SumBlocks(int width, int s2, const float* __restrict re, const float* __restrict im,
                const float* __restrict active, const float* __restrict bg,
                const float* __restrict t, float* __restrict out_re, float* __restrict out_im,
-               float* __restrict out_dc, float* __restrict span) {
+               float* __restrict out_dc, float* __restrict span, float* __restrict near,
+               float* __restrict far) {
   for (int c0 = 0; c0 < width; c0 += G) {
     const std::size_t base = static_cast<std::size_t>(c0) * s2;
     float sr[G], si[G], sd[G], dmin[G], dmax[G], tmax[G];
@@ -58,6 +59,8 @@ void SumBlocks(int width, int s2, const float* __restrict re, const float* __res
       span[c0 + g] =
           std::bit_cast<float>((std::bit_cast<std::uint32_t>(dmax[g] - dmin[g]) & hit_all) |
                                (std::bit_cast<std::uint32_t>(missed) & ~hit_all));
+      near[c0 + g] = dmin[g];
+      far[c0 + g] = dmax[g];
     }
   }
 }
@@ -67,7 +70,8 @@ void SumBlocks(int width, int s2, const float* __restrict re, const float* __res
 void SumBlocks4(int width, int s2, const float* __restrict re, const float* __restrict im,
                 const float* __restrict active, const float* __restrict bg,
                 const float* __restrict t, float* __restrict out_re, float* __restrict out_im,
-                float* __restrict out_dc, float* __restrict span) {
+                float* __restrict out_dc, float* __restrict span, float* __restrict near,
+                float* __restrict far) {
   using V = float __attribute__((vector_size(16)));
   const auto load = [](const float* p) {
     V v;
@@ -97,6 +101,8 @@ void SumBlocks4(int width, int s2, const float* __restrict re, const float* __re
     store(out_dc + c0, sd);
     const V missed = dmax > zero ? inf : zero;
     store(span + c0, tmax < inf ? dmax - dmin : missed);
+    store(near + c0, dmin);
+    store(far + c0, dmax);
   }
 }
 
@@ -192,22 +198,22 @@ void SumBlocks4(int width, int s2, const float* __restrict re, const float* __re
     int group, int width, int s2, const float* __restrict re, const float* __restrict im,
     const float* __restrict active, const float* __restrict bg, const float* __restrict t,
     float* __restrict out_re, float* __restrict out_im, float* __restrict out_dc,
-    float* __restrict span) {
+    float* __restrict span, float* __restrict near, float* __restrict far) {
   switch (group) {
     case 16:
-      SumBlocks<16>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      SumBlocks<16>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span, near, far);
       break;
     case 8:
-      SumBlocks<8>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      SumBlocks<8>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span, near, far);
       break;
     case 4:
-      SumBlocks4(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      SumBlocks4(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span, near, far);
       break;
     case 2:
-      SumBlocks<2>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      SumBlocks<2>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span, near, far);
       break;
     default:
-      SumBlocks<1>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span);
+      SumBlocks<1>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span, near, far);
   }
 }
 

@@ -24,8 +24,11 @@ struct Render {
   std::vector<float> dc;                         ///< optical DC: active + background
   std::vector<float> scat_re, scat_im, scat_dc;  ///< scattered additions
   std::vector<float> span_m;                     ///< subsample distance span (inf when some miss)
+  std::vector<float> near_m;                     ///< nearest subsample hit, m (inf when all miss)
+  std::vector<float> far_m;                      ///< farthest subsample hit, m (0 when all miss)
   void Resize(std::size_t n) {
-    for (auto* v : {&re, &im, &direct_re, &direct_im, &dc, &scat_re, &scat_im, &scat_dc, &span_m}) {
+    for (auto* v : {&re, &im, &direct_re, &direct_im, &dc, &scat_re, &scat_im, &scat_dc, &span_m,
+                    &near_m, &far_m}) {
       v->assign(n, 0.f);
     }
   }
@@ -116,12 +119,14 @@ void AddGlossyLobes(const MaterialTable& mats, std::size_t n_glossy, const unsig
                     GlossyScratch& scratch);
 
 /// Per pixel of a row: the sums of its S^2 subsamples (phasor, DC = active + background), in
-/// subsample order, and the span of the subsample distances (inf when some but not all miss, 0
-/// when all miss). Subsamples in blocks of `group` pixels as in PixelRays::Index.
+/// subsample order; the span of the subsample distances (inf when some but not all miss, 0
+/// when all miss); the nearest (`near`, inf when all miss) and farthest (`far`, 0 when all miss)
+/// subsample hit. Subsamples in blocks of `group` pixels as in PixelRays::Index.
 void SumSubsamples(int group, int width, int s2, const float* __restrict re,
                    const float* __restrict im, const float* __restrict active,
                    const float* __restrict bg, const float* __restrict t, float* __restrict out_re,
-                   float* __restrict out_im, float* __restrict out_dc, float* __restrict span);
+                   float* __restrict out_im, float* __restrict out_dc, float* __restrict span,
+                   float* __restrict near, float* __restrict far);
 
 /// In-band irradiance (W/m^2) from the switched-on lamps at a surface point with normal n (no
 /// shadows, inverse square); a bulb (object lamp_bulb_begin + l) does not light itself.

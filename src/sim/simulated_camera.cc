@@ -251,7 +251,7 @@ struct SimulatedCamera::Impl {
                 sc.im.data());
         SumSubsamples(group, width, s2, sc.re.data(), sc.im.data(), sc.weight.data(), sc.bg.data(),
                       b.t.data(), &out.re[row_px], &out.im[row_px], &out.dc[row_px],
-                      &out.span_m[row_px]);
+                      &out.span_m[row_px], &out.near_m[row_px], &out.far_m[row_px]);
         std::copy_n(&out.re[row_px], width, &out.direct_re[row_px]);
         std::copy_n(&out.im[row_px], width, &out.direct_im[row_px]);
         for (int i : sc.mirrored) {
@@ -455,6 +455,8 @@ std::optional<Frame> SimulatedCamera::Grab() {
   truth.radial_distance_m = Image<float>(w, h);
   truth.causes = Image<PixelFlags>(w, h);
   truth.sigma_m = Image<float>(w, h);
+  truth.footprint_near_m = Image<float>(w, h);
+  truth.footprint_far_m = Image<float>(w, h);
 
   const double range = im.range_m;
   const double two_pi = 2 * kPi;
@@ -552,12 +554,17 @@ std::optional<Frame> SimulatedCamera::Grab() {
           if (!(td < kInf)) causes.Set(Flag::kNoReturn);
           if (td >= range && td < kInf) causes.Set(Flag::kBeyondUnambiguous);
         }
+        float near = rd.near_m[p], far = rd.far_m[p];
+        bool moved = false;
         for (int k = 1; k < slots; ++k) {
-          if (differ(im.renders[k].re[p], im.renders[k].im[p], rd.re[p], rd.im[p])) {
-            causes.Set(Flag::kMotion);
-            break;
-          }
+          const Render& rk = im.renders[k];
+          moved = moved || differ(rk.re[p], rk.im[p], rd.re[p], rd.im[p]);
+          near = std::min(near, rk.near_m[p]);
+          far = std::max(far, rk.far_m[p]);
         }
+        if (moved) causes.Set(Flag::kMotion);
+        truth.footprint_near_m[p] = near;
+        truth.footprint_far_m[p] = far > 0 ? far : kInf;
         truth.radial_distance_m[p] = td;
         truth.sigma_m[p] = sr.sigma[c];
         im.truth_noise_e2[p] = sr.noise[c];

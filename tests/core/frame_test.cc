@@ -34,7 +34,15 @@ TEST(FrameTest, ValidateRejectsMismatchedChannels) {
   f.amplitude = Image<std::uint16_t>(160, 123);
   EXPECT_THROW(ValidateFrame(f), Error);
   f = MakeFrame(4, 4);
-  f.truth = GroundTruth{Image<float>(4, 5), Image<PixelFlags>(4, 4), {}};
+  f.truth = GroundTruth{Image<float>(4, 5), Image<PixelFlags>(4, 4), {}, {}, {}};
+  EXPECT_THROW(ValidateFrame(f), Error);
+  f.truth = GroundTruth{Image<float>(4, 4), Image<PixelFlags>(4, 4), {}, {}, {}};
+  EXPECT_NO_THROW(ValidateFrame(f));
+  f.truth->footprint_near_m = Image<float>(4, 4);  // near without far
+  EXPECT_THROW(ValidateFrame(f), Error);
+  f.truth->footprint_far_m = Image<float>(4, 4);
+  EXPECT_NO_THROW(ValidateFrame(f));
+  f.truth->sigma_m = Image<float>(3, 4);
   EXPECT_THROW(ValidateFrame(f), Error);
   f = MakeFrame(4, 4);
   f.info.modulation_frequency_hz = 0;

@@ -393,6 +393,14 @@ TEST(ExperimentsTest, BeyondMethodsBeatThePaperAndTheVendor) {
   for (const char* method : {"paper", "vendor"}) {
     EXPECT_LE(m(std::string(method) + ".f1"), m(std::string(method) + ".ceiling_f1")) << method;
     EXPECT_LT(m(std::string(method) + ".ceiling_f1"), 1.0) << method;
+    // The same bound under the footprint truth (a pixel reading a surface inside its footprint
+    // is right), and that truth forgives: its error is at most the central ray's.
+    EXPECT_LE(m(std::string(method) + ".footprint_f1"),
+              m(std::string(method) + ".footprint_ceiling_f1"))
+        << method;
+    EXPECT_LE(m(std::string(method) + ".footprint_rmse_kept_within_l"),
+              m(std::string(method) + ".rmse_kept_within_l"))
+        << method;
   }
   // Smoothing after every filter rejects nothing and touches only kept pixels, so the same
   // pixels are kept; averaging a pixel with its own surface's neighbours lowers its noise, so

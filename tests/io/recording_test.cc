@@ -50,7 +50,10 @@ CameraInfo SmallCamera() {
 
 // A frame whose every pixel and info field depends on the index and a random stream, so any
 // mix-up of frames, channels, rows or columns changes the data.
-Frame MakeFrame(const CameraInfo& cam, int index, bool flags, bool truth, std::mt19937& rng) {
+// `footprint`: the truth carries footprint_near_m / _far_m (recordings made before they existed
+// do not).
+Frame MakeFrame(const CameraInfo& cam, int index, bool flags, bool truth, std::mt19937& rng,
+                bool footprint = true) {
   Frame f;
   const int w = cam.width(), h = cam.height();
   f.distance = Image<std::uint16_t>(w, h);
@@ -83,6 +86,15 @@ Frame MakeFrame(const CameraInfo& cam, int index, bool flags, bool truth, std::m
       t.causes[i] = PixelFlags(static_cast<std::uint16_t>(u16(rng) & kTruthMask));
       t.sigma_m[i] = real(rng) * 0.01f;
     }
+    if (footprint) {
+      t.footprint_near_m = Image<float>(w, h);
+      t.footprint_far_m = Image<float>(w, h);
+      for (std::size_t i = 0; i < t.footprint_near_m.size(); ++i) {
+        const float a = real(rng), b = real(rng);
+        t.footprint_near_m[i] = i == 3 ? std::numeric_limits<float>::infinity() : std::min(a, b);
+        t.footprint_far_m[i] = i == 3 ? std::numeric_limits<float>::infinity() : std::max(a, b);
+      }
+    }
     f.truth = std::move(t);
   }
   f.info.sequence = static_cast<std::uint64_t>(index);
@@ -109,6 +121,8 @@ void ExpectSameFrame(const Frame& a, const Frame& b) {
     EXPECT_EQ(a.truth->radial_distance_m, b.truth->radial_distance_m);
     EXPECT_EQ(a.truth->causes, b.truth->causes);
     EXPECT_EQ(a.truth->sigma_m, b.truth->sigma_m);
+    EXPECT_EQ(a.truth->footprint_near_m, b.truth->footprint_near_m);
+    EXPECT_EQ(a.truth->footprint_far_m, b.truth->footprint_far_m);
   }
   EXPECT_EQ(a.info.sequence, b.info.sequence);
   EXPECT_EQ(a.info.timestamp_ns, b.info.timestamp_ns);
@@ -125,6 +139,7 @@ struct RoundTripCase {
   bool flags;
   bool truth;
   int compression;
+  bool footprint = true;
 };
 
 class RoundTrip : public RecordingTest, public ::testing::WithParamInterface<RoundTripCase> {};
@@ -134,7 +149,9 @@ TEST_P(RoundTrip, RecordThenPlayIsBitExact) {
   const CameraInfo cam = SmallCamera();
   std::mt19937 rng(42);
   std::vector<Frame> frames;
-  for (int i = 0; i < 5; ++i) frames.push_back(MakeFrame(cam, i, c.flags, c.truth, rng));
+  for (int i = 0; i < 5; ++i) {
+    frames.push_back(MakeFrame(cam, i, c.flags, c.truth, rng, c.footprint));
+  }
   const fs::path file = dir_ / "rec.h5";
   RecordingOptions opts;
   opts.compression_level = c.compression;
@@ -171,7 +188,8 @@ INSTANTIATE_TEST_SUITE_P(Variants, RoundTrip,
                          ::testing::Values(RoundTripCase{false, false, 4},
                                            RoundTripCase{true, false, 0},
                                            RoundTripCase{true, true, 9},
-                                           RoundTripCase{false, true, 1}));
+                                           RoundTripCase{false, true, 1},
+                                           RoundTripCase{true, true, 2, false}));
 
 TEST_F(RecordingTest, PlaybackSeeksLoopsAndRefusesChanges) {
   const CameraInfo cam = SmallCamera();
@@ -263,6 +281,28 @@ TEST_F(RecordingTest, WriterRejectsInconsistentFrames) {
   }
   writer.Close();
   EXPECT_THROW(writer.Append(MakeFrame(cam, 2, true, false, rng)), Error);
+
+  // Truth channels of the wrong size are refused (they would be read past their end), and so
+  // is a footprint that comes and goes.
+  RecordingWriter truth_writer(dir_ / "truth.h5", cam);
+  Frame short_sigma = MakeFrame(cam, 0, false, true, rng);
+  short_sigma.truth->sigma_m = Image<float>(2, 2);
+  Frame no_sigma = MakeFrame(cam, 0, false, true, rng);
+  no_sigma.truth->sigma_m = Image<float>();
+  Frame short_far = MakeFrame(cam, 0, false, true, rng);
+  short_far.truth->footprint_far_m = Image<float>(cam.width(), 1);
+  for (const Frame* f : {&short_sigma, &no_sigma, &short_far}) {
+    EXPECT_THROW(truth_writer.Append(*f), Error);
+  }
+  truth_writer.Append(MakeFrame(cam, 0, false, true, rng));
+  try {
+    truth_writer.Append(MakeFrame(cam, 1, false, true, rng, false));  // lost its footprint
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+  truth_writer.Close();
+  EXPECT_EQ(RecordingReader(dir_ / "truth.h5").frame_count(), 1u);
   EXPECT_EQ(RecordingReader(dir_ / "rec.h5").frame_count(), 1u);
   RecordingOptions bad;
   bad.compression_level = 10;
@@ -388,6 +428,23 @@ TEST_F(HostileRecording, NaNsAndMissingOrWrongDatasets) {
               H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data());
               H5Dclose(d);
             }),
+            ErrorCode::kFormat);
+  // A footprint whose near lies beyond its far, or that is NaN.
+  for (const float near : {5.0f, NAN}) {
+    EXPECT_EQ(EditAndOpen([near](hid_t f) {
+                const hid_t d = H5Dopen2(f, "truth/footprint_near_m", H5P_DEFAULT);
+                std::vector<float> values(3 * 5 * 7, near);
+                const hid_t far = H5Dopen2(f, "truth/footprint_far_m", H5P_DEFAULT);
+                std::vector<float> far_values(3 * 5 * 7, 4.0f);
+                H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data());
+                H5Dwrite(far, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, far_values.data());
+                H5Dclose(d);
+                H5Dclose(far);
+              }),
+              ErrorCode::kFormat);
+  }
+  // The attribute says there is a footprint but a dataset is missing.
+  EXPECT_EQ(EditAndOpen([](hid_t f) { H5Ldelete(f, "truth/footprint_far_m", H5P_DEFAULT); }),
             ErrorCode::kFormat);
 }
 

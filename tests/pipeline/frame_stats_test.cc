@@ -265,5 +265,23 @@ TEST(FrameStatsTest, LaneWiseLoopsAgreeWithTheSequentialLoop) {
   EXPECT_GT(want.sum_squared_error_m2, 0.0);
 }
 
+TEST(FrameStatsTest, FootprintErrorIsTheDistanceToTheNearestSurfaceInTheFootprint) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  // An edge pixel: the board at 1.0 m, the wall at 3.0 m, its central ray on the wall.
+  EXPECT_NEAR(FootprintErrorM(1.02, 3.0, 1.0, 3.0), 0.02, 1e-12);  // reads the board
+  EXPECT_NEAR(FootprintErrorM(2.9, 3.0, 1.0, 3.0), 0.1, 1e-12);    // near the wall
+  EXPECT_NEAR(FootprintErrorM(2.0, 3.0, 1.0, 3.0), 1.0, 1e-12);    // between: a flying pixel
+  // One surface: the central truth decides unless the footprint's span is closer.
+  EXPECT_NEAR(FootprintErrorM(2.5, 2.0, 1.99, 2.01), 0.49, 1e-12);
+  // The central ray misses (sky) but part of the footprint hits the wall's edge.
+  EXPECT_NEAR(FootprintErrorM(4.01, inf, 4.0, 4.0), 0.01, 1e-12);
+  // Nothing is hit, or nothing is measured.
+  EXPECT_EQ(FootprintErrorM(4.0, inf, inf, inf), inf);
+  EXPECT_EQ(FootprintErrorM(nan, 3.0, 1.0, 3.0), inf);
+  // No footprint (NaN candidates are skipped): the central error.
+  EXPECT_NEAR(FootprintErrorM(3.3, 3.0, nan, nan), 0.3, 1e-12);
+}
+
 }  // namespace
 }  // namespace tofcam

@@ -89,7 +89,8 @@ TEST(MetricConversionTest, CopiesInfoAndTruth) {
   f.info.sequence = 42;
   f.info.integration_time_register = 17;
   f.info.camera_model = "SR-2";
-  f.truth = GroundTruth{Image<float>(2, 1, 1.5f), Image<PixelFlags>(2, 1), Image<float>(2, 1)};
+  f.truth =
+      GroundTruth{Image<float>(2, 1, 1.5f), Image<PixelFlags>(2, 1), Image<float>(2, 1), {}, {}};
   f.truth->causes(0, 1) = PixelFlags(Flag::kMixed);
   const MetricFrame m = ConvertToMetric(f);
   EXPECT_EQ(m.info.sequence, 42u);

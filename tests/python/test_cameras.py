@@ -22,6 +22,18 @@ def test_simulator_frames_equal_the_cli_recording(cli, tmp_path):
         np.testing.assert_array_equal(got.truth.radial_distance_m,
                                       expected.truth.radial_distance_m)
         np.testing.assert_array_equal(got.truth.sigma_m, expected.truth.sigma_m)
+        for channel in ("footprint_near_m", "footprint_far_m"):
+            np.testing.assert_array_equal(getattr(got.truth, channel),
+                                          getattr(expected.truth, channel))
+        # The footprint holds the central ray's surface where that is hit, up to the distance
+        # change between the centre and the sub-rays, which sample other points of the pixel's
+        # area (sub-mm on the walls, 6 mm on the floor at a grazing angle; 1 % allowed).
+        d = got.truth.radial_distance_m
+        hit = np.isfinite(d)
+        assert (got.truth.footprint_near_m[hit] <= 1.01 * d[hit]).all()
+        assert (got.truth.footprint_far_m[hit] >= 0.99 * d[hit]).all()
+        # The hand's edge: pixels whose footprint holds the hand (0.2 m) and the wall (3 m).
+        assert ((got.truth.footprint_near_m < 0.5) & (got.truth.footprint_far_m > 2.5)).any()
         assert got.info.timestamp_ns == expected.info.timestamp_ns
         assert got.info.integration_time_register == 16
 

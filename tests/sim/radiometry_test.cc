@@ -143,8 +143,8 @@ TEST(RadiometryTest, SubsampleSumsAndDistanceSpan) {
   const float active[12] = {1, 1, 1, 1, 2, 2, 2, 0, 0, 0, 0, 0};
   const float bg[12] = {0.5f, 0.5f, 0.5f, 0.5f, 0, 0, 0, 1, 1, 1, 1, 1};
   const float t[12] = {2.0f, 2.1f, 2.5f, 2.2f, 1, 1, 1, inf, inf, inf, inf, inf};
-  float out_re[3], out_im[3], out_dc[3], span[3];
-  SumSubsamples(1, 3, 4, re, im, active, bg, t, out_re, out_im, out_dc, span);
+  float out_re[3], out_im[3], out_dc[3], span[3], near[3], far[3];
+  SumSubsamples(1, 3, 4, re, im, active, bg, t, out_re, out_im, out_dc, span, near, far);
   EXPECT_FLOAT_EQ(out_re[0], 10.f);
   EXPECT_FLOAT_EQ(out_im[0], 1.f);
   EXPECT_FLOAT_EQ(out_dc[0], 6.f);
@@ -152,6 +152,38 @@ TEST(RadiometryTest, SubsampleSumsAndDistanceSpan) {
   EXPECT_EQ(span[1], inf);  // some subsamples miss: the pixel straddles an edge to nothing
   EXPECT_EQ(span[2], 0.f);  // all miss
   EXPECT_FLOAT_EQ(out_dc[2], 4.f);
+  // Footprint: nearest and farthest hit; a miss counts for neither.
+  EXPECT_EQ(near[0], 2.0f);
+  EXPECT_EQ(far[0], 2.5f);
+  EXPECT_EQ(near[1], 1.0f);
+  EXPECT_EQ(far[1], 1.0f);
+  EXPECT_EQ(near[2], inf);
+  EXPECT_EQ(far[2], 0.f);
+}
+
+TEST(RadiometryTest, FootprintOfTheVectorisedGroupOfFour) {
+  // Group 4 (SumBlocks4): subsample s of pixel g at index s * 4 + g. Pixel 0 straddles an edge
+  // (1 m and 3 m), pixel 1 sees one wall, pixel 2 misses once, pixel 3 misses always.
+  const float inf = std::numeric_limits<float>::infinity();
+  float t[16], zero[16] = {};
+  const float per_pixel[4][4] = {
+      {3, 1, 3, 1}, {2, 2.01f, 2.02f, 2.03f}, {inf, 5, 4, 6}, {inf, inf, inf, inf}};
+  for (int g = 0; g < 4; ++g) {
+    for (int s = 0; s < 4; ++s) t[s * 4 + g] = per_pixel[g][s];
+  }
+  float out_re[4], out_im[4], out_dc[4], span[4], near[4], far[4];
+  SumSubsamples(4, 4, 4, zero, zero, zero, zero, t, out_re, out_im, out_dc, span, near, far);
+  EXPECT_EQ(near[0], 1.f);
+  EXPECT_EQ(far[0], 3.f);
+  EXPECT_EQ(span[0], 2.f);
+  EXPECT_EQ(near[1], 2.f);
+  EXPECT_EQ(far[1], 2.03f);
+  EXPECT_EQ(near[2], 4.f);
+  EXPECT_EQ(far[2], 6.f);
+  EXPECT_EQ(span[2], inf);
+  EXPECT_EQ(near[3], inf);
+  EXPECT_EQ(far[3], 0.f);
+  EXPECT_EQ(span[3], 0.f);
 }
 
 TEST(RadiometryTest, LampIrradianceIsInverseSquareWithCosine) {

@@ -186,6 +186,16 @@ TEST(SimulatedCameraTest, EdgePixelsLandBetweenTheSurfaces) {
     EXPECT_NEAR(Err(f.distance(r, 70), f.truth->radial_distance_m(r, 70)), 0.0, 0.002);
     EXPECT_NEAR(Err(f.distance(r, 90), f.truth->radial_distance_m(r, 90)), 0.0, 0.002);
     EXPECT_FALSE(f.truth->causes(r, 70).Has(Flag::kMixed));
+    // Its footprint holds both surfaces: the board as its neighbour on the left sees it, the
+    // wall as the one on the right does (subsample rays lie within 0.4 px of those centres, a
+    // few mm of radial distance at these angles).
+    const GroundTruth& t = *f.truth;
+    EXPECT_NEAR(t.footprint_near_m(r, 80), t.radial_distance_m(r, 79), 0.005) << r;
+    EXPECT_NEAR(t.footprint_far_m(r, 80), t.radial_distance_m(r, 81), 0.005) << r;
+    // One surface: a footprint of a few mm around the central ray's distance.
+    EXPECT_LE(t.footprint_near_m(r, 70), t.radial_distance_m(r, 70));
+    EXPECT_GE(t.footprint_far_m(r, 70), t.radial_distance_m(r, 70));
+    EXPECT_LT(t.footprint_far_m(r, 70) - t.footprint_near_m(r, 70), 0.005) << r;
   }
 }
 

@@ -40,6 +40,14 @@ struct GroundTruth {
   Image<PixelFlags> causes;
   /// True per-pixel distance standard deviation (m) from the shot-noise model, 0 where unknown.
   Image<float> sigma_m;
+  /// Nearest and farthest radial distance (m) at which the rays through the pixel's area (its
+  /// footprint: the simulator's subsamples, over every rendering of the exposure) hit a
+  /// surface; both +inf where none hits. A pixel whose footprint straddles a depth edge
+  /// (kMixed) that reads one of the two surfaces measures a real surface point within half a
+  /// pixel of its ray, though metres from `radial_distance_m`. Empty when the source does not
+  /// give them (recordings made before they existed).
+  Image<float> footprint_near_m;
+  Image<float> footprint_far_m;
 };
 
 /// One frame exactly as a SwissRanger delivers it: three 16-bit register channels.

@@ -62,6 +62,17 @@ struct FrameStats {
   double good_kept_fraction = 0.0;    ///< good_kept / good_pixels.
 };
 
+/// A pixel's error against its footprint (GroundTruth::footprint_near_m / _far_m), m: the
+/// smallest |measured - x| over the central ray's distance `truth_m` and the nearest and
+/// farthest surface hit within the pixel's area; non-finite candidates are skipped. +inf when
+/// no candidate is finite (nothing in the footprint is hit) or `measured_m` is NaN. A pixel at a
+/// depth edge that reads one of its two surfaces measures a real surface point within half a
+/// pixel of its ray, though metres from its central ray's surface: the central truth calls it
+/// wrong, this one right. A reading between the two surfaces (a flying pixel) is wrong under
+/// both. Always <= |measured - truth|.
+[[nodiscard]] double FootprintErrorM(double measured_m, double truth_m, double near_m,
+                                     double far_m) noexcept;
+
 /// Statistics of `frame` (after filtering: its flags decide what is kept). Uses `delta_l_m` when
 /// present and `truth` when present. One pass over the pixels, no allocation. Throws
 /// Error(kInvalidArgument) for bad options or an inconsistent frame (channels, flags or truth of
