@@ -60,6 +60,8 @@ nlohmann::json FrameJson(const Frame& f, const std::string& scene, const std::st
                 {"intensity", stem + "_intensity.png"},
                 {"truth_radial_distance_m", stem + "_truth_distance_m.f32"},
                 {"truth_sigma_m", stem + "_truth_sigma_m.f32"},
+                {"truth_footprint_near_m", stem + "_truth_footprint_near_m.f32"},
+                {"truth_footprint_far_m", stem + "_truth_footprint_far_m.f32"},
                 {"truth_causes", stem + "_truth_causes.png"}};
   return j;
 }
@@ -125,6 +127,8 @@ void RunSimulate(const SimulateOptions& o) {
       WritePngGray16(base.string() + "_intensity.png", f.intensity);
       WriteFloatImage(base.string() + "_truth_distance_m.f32", f.truth->radial_distance_m);
       WriteFloatImage(base.string() + "_truth_sigma_m.f32", f.truth->sigma_m);
+      WriteFloatImage(base.string() + "_truth_footprint_near_m.f32", f.truth->footprint_near_m);
+      WriteFloatImage(base.string() + "_truth_footprint_far_m.f32", f.truth->footprint_far_m);
       Image<std::uint16_t> causes(f.width(), f.height());
       for (std::size_t p = 0; p < causes.size(); ++p) causes[p] = f.truth->causes[p].bits();
       WritePngGray16(base.string() + "_truth_causes.png", causes);

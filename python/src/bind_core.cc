@@ -260,10 +260,10 @@ void BindFrames(py::module_& m) {
           "float32 (H, W): true distance standard deviation from the shot-noise model, m.");
   Channel(truth, "footprint_near_m", &GroundTruth::footprint_near_m,
           "float32 (H, W): nearest distance hit within the pixel's footprint, m; inf where "
-          "nothing is hit; empty (0, 0) when the source does not give it.");
+          "nothing is hit; None when the source does not give it.");
   Channel(truth, "footprint_far_m", &GroundTruth::footprint_far_m,
           "float32 (H, W): farthest distance hit within the pixel's footprint, m; inf where "
-          "nothing is hit; empty (0, 0) when the source does not give it.");
+          "nothing is hit; None when the source does not give it.");
   truth.def("__repr__", [](const GroundTruth& t) {
     return Repr("GroundTruth", {"width=" + std::to_string(t.radial_distance_m.width()),
                                 "height=" + std::to_string(t.radial_distance_m.height())});

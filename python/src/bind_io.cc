@@ -25,7 +25,8 @@ void BindRecordings(py::module_& m) {
       .def_readonly("calibration_id", &RecordingMetadata::calibration_id)
       .def_readonly("frame_camera_model", &RecordingMetadata::frame_camera_model)
       .def_readonly("has_source_flags", &RecordingMetadata::has_source_flags)
-      .def_readonly("has_ground_truth", &RecordingMetadata::has_ground_truth);
+      .def_readonly("has_ground_truth", &RecordingMetadata::has_ground_truth)
+      .def_readonly("has_truth_footprint", &RecordingMetadata::has_truth_footprint);
 
   py::class_<RecordingWriter>(
       m, "RecordingWriter",

@@ -529,6 +529,7 @@ struct RecordingReader::Impl {
       io_internal::ReadScalarAttribute(path, file.get(), "has_truth_footprint", H5T_NATIVE_UINT8,
                                        &footprint);
       has_footprint = footprint != 0;
+      meta.has_truth_footprint = has_footprint;
       if (has_footprint) {
         n = std::min(n, OpenImage(truth_near, "truth/footprint_near_m", H5T_FLOAT, 4));
         n = std::min(n, OpenImage(truth_far, "truth/footprint_far_m", H5T_FLOAT, 4));

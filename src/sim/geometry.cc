@@ -89,12 +89,10 @@ void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
 
 // The loops below take __restrict pointers and are kept out of line (see hot_loop.h).
 // (dx, dy, dz) = rot * (x, y, z) for n directions.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void RotateArrays(const Eigen::Matrix3f& rot,
-                                                      const float* __restrict x,
-                                                      const float* __restrict y,
-                                                      const float* __restrict z, std::size_t n,
-                                                      float* __restrict dx, float* __restrict dy,
-                                                      float* __restrict dz) {
+TOFCAM_SIM_LOOP void RotateArrays(const Eigen::Matrix3f& rot, const float* __restrict x,
+                                  const float* __restrict y, const float* __restrict z,
+                                  std::size_t n, float* __restrict dx, float* __restrict dy,
+                                  float* __restrict dz) {
   const float r00 = rot(0, 0), r01 = rot(0, 1), r02 = rot(0, 2);
   const float r10 = rot(1, 0), r11 = rot(1, 1), r12 = rot(1, 2);
   const float r20 = rot(2, 0), r21 = rot(2, 1), r22 = rot(2, 2);

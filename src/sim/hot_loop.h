@@ -23,10 +23,17 @@ inline constexpr float kInf = std::numeric_limits<float>::infinity();
 #define TOFCAM_SIM_ASAN 1
 #endif
 #endif
+// TOFCAM_SIM_LOOP marks such a loop: out of line (see below) and, where available, cloned.
+// Clang refuses noinline together with target_clones; a clone is called through its ifunc
+// resolver and never inlined anyway, so clang gets the clones alone.
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(TOFCAM_SIM_ASAN)
-#define TOFCAM_SIM_CLONES __attribute__((target_clones("avx2", "default")))
+#if defined(__clang__)
+#define TOFCAM_SIM_LOOP __attribute__((target_clones("avx2", "default")))
 #else
-#define TOFCAM_SIM_CLONES
+#define TOFCAM_SIM_LOOP [[gnu::noinline]] __attribute__((target_clones("avx2", "default")))
+#endif
+#else
+#define TOFCAM_SIM_LOOP [[gnu::noinline]]
 #endif
 
 // The loops below take __restrict pointers: without them GCC needs more run-time alias checks

@@ -17,12 +17,13 @@ const NormalTable& GetNormalTable() {
 // The loop below takes __restrict pointers and is kept out of line (see hot_loop.h).
 // Per pixel of a row: the standard deviation of the Gaussian shot noise of each tap and
 // the ground-truth sigma L sqrt(B + s^2) / (2 sqrt(2) pi A) (0 without signal), vectorised.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void NoiseScales(
-    int n, double read_var, double sigma_scale, const double* __restrict mu0,
-    const double* __restrict mu1, const double* __restrict mu2, const double* __restrict mu3,
-    const double* __restrict a_mean, const double* __restrict b_mean, float* __restrict sd0,
-    float* __restrict sd1, float* __restrict sd2, float* __restrict sd3, float* __restrict sigma,
-    float* __restrict noise) {
+TOFCAM_SIM_LOOP void NoiseScales(int n, double read_var, double sigma_scale,
+                                 const double* __restrict mu0, const double* __restrict mu1,
+                                 const double* __restrict mu2, const double* __restrict mu3,
+                                 const double* __restrict a_mean, const double* __restrict b_mean,
+                                 float* __restrict sd0, float* __restrict sd1,
+                                 float* __restrict sd2, float* __restrict sd3,
+                                 float* __restrict sigma, float* __restrict noise) {
   for (int c = 0; c < n; ++c) {
     // Single precision: the normal deviates these scale are floats and the truth sigma is stored
     // as one; packed float square roots are several times faster than double ones. Only means of

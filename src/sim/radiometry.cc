@@ -111,10 +111,10 @@ void SumBlocks4(int width, int s2, const float* __restrict re, const float* __re
 // The loops below take __restrict pointers and are kept out of line (see hot_loop.h).
 
 // Cosine of incidence |n . d| / |n| (at most 1) for n rays; garbage where the ray missed.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void CosIncidence(
-    std::size_t n, const float* __restrict nx, const float* __restrict ny,
-    const float* __restrict nz, const float* __restrict dx, const float* __restrict dy,
-    const float* __restrict dz, float* __restrict cos_i) {
+TOFCAM_SIM_LOOP void CosIncidence(std::size_t n, const float* __restrict nx,
+                                  const float* __restrict ny, const float* __restrict nz,
+                                  const float* __restrict dx, const float* __restrict dy,
+                                  const float* __restrict dz, float* __restrict cos_i) {
   for (std::size_t i = 0; i < n; ++i) {
     const float len = std::sqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
     cos_i[i] = std::min(1.f, std::abs(nx[i] * dx[i] + ny[i] * dy[i] + nz[i] * dz[i]) / len);
@@ -123,10 +123,9 @@ void SumBlocks4(int width, int s2, const float* __restrict re, const float* __re
 
 // Per subsample: active electrons/s = weight / d^2 (written back into weight) and the modulated
 // phasor contrast * active * exp(i 2 pi d / L).
-[[gnu::noinline]] TOFCAM_SIM_CLONES void Phasors(std::size_t n, float inv_range, float contrast,
-                                                 const float* __restrict dist,
-                                                 float* __restrict weight, float* __restrict re,
-                                                 float* __restrict im) {
+TOFCAM_SIM_LOOP void Phasors(std::size_t n, float inv_range, float contrast,
+                             const float* __restrict dist, float* __restrict weight,
+                             float* __restrict re, float* __restrict im) {
   for (std::size_t i = 0; i < n; ++i) {
     const float d = dist[i];
     const float active = weight[i] / (d * d);
@@ -141,10 +140,9 @@ void SumBlocks4(int width, int s2, const float* __restrict re, const float* __re
 // cos^n for the glossy subsamples of a row, n[k] >= 0 whole numbers below 2^bits: binary
 // exponentiation in double precision (the float nearest cos^n, see internal::PowInt) with the
 // same `bits` squarings for every lane and a bit-mask select of the factor, so it vectorises.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void PowIntRow(std::size_t m, int bits,
-                                                   const float* __restrict x,
-                                                   const int* __restrict n, double* __restrict base,
-                                                   double* __restrict result) {
+TOFCAM_SIM_LOOP void PowIntRow(std::size_t m, int bits, const float* __restrict x,
+                               const int* __restrict n, double* __restrict base,
+                               double* __restrict result) {
   for (std::size_t k = 0; k < m; ++k) {
     base[k] = x[k];
     result[k] = 1.0;
@@ -166,7 +164,7 @@ void SumBlocks4(int width, int s2, const float* __restrict re, const float* __re
 // background electrons/s. Misses read the zero entry n_obj of the material arrays. The gathers
 // are scalar but branch-free; the rest vectorises. The subsamples on glossy materials are listed
 // in `glossy_at` (n_glossy of them) and their cosines in `glossy_x`; the caller adds the lobe.
-[[gnu::noinline]] TOFCAM_SIM_CLONES std::size_t ShadeSurfaces(
+TOFCAM_SIM_LOOP std::size_t ShadeSurfaces(
     std::size_t n, unsigned n_obj, const unsigned* __restrict geom, const float* __restrict t,
     const float* __restrict cos_in, const float* __restrict bg_k, const float* __restrict diffuse,
     const float* __restrict glossy, const float* __restrict radiance, float* __restrict brdf,
@@ -187,18 +185,18 @@ void SumBlocks4(int width, int s2, const float* __restrict re, const float* __re
 }
 
 // weight = active * brdf * cos.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void Weights(std::size_t n, const float* __restrict active,
-                                                 const float* __restrict brdf,
-                                                 const float* __restrict cos_i,
-                                                 float* __restrict weight) {
+TOFCAM_SIM_LOOP void Weights(std::size_t n, const float* __restrict active,
+                             const float* __restrict brdf, const float* __restrict cos_i,
+                             float* __restrict weight) {
   for (std::size_t i = 0; i < n; ++i) weight[i] = active[i] * brdf[i] * cos_i[i];
 }
 
-[[gnu::noinline]] TOFCAM_SIM_CLONES void SumSubsamples(
-    int group, int width, int s2, const float* __restrict re, const float* __restrict im,
-    const float* __restrict active, const float* __restrict bg, const float* __restrict t,
-    float* __restrict out_re, float* __restrict out_im, float* __restrict out_dc,
-    float* __restrict span, float* __restrict near, float* __restrict far) {
+TOFCAM_SIM_LOOP void SumSubsamples(int group, int width, int s2, const float* __restrict re,
+                                   const float* __restrict im, const float* __restrict active,
+                                   const float* __restrict bg, const float* __restrict t,
+                                   float* __restrict out_re, float* __restrict out_im,
+                                   float* __restrict out_dc, float* __restrict span,
+                                   float* __restrict near, float* __restrict far) {
   switch (group) {
     case 16:
       SumBlocks<16>(width, s2, re, im, active, bg, t, out_re, out_im, out_dc, span, near, far);

@@ -51,12 +51,10 @@ inline void PixelMean(const SensorConstants& k, float re, float im, float dc, fl
 }
 
 // mu_k = B + A cos(phi - k pi / 2): cos, sin, -cos, -sin, all from one rendering.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void TapMeans1(int n, const double* __restrict a,
-                                                   const double* __restrict b,
-                                                   const double* __restrict cp,
-                                                   const double* __restrict sp,
-                                                   double* __restrict mu0, double* __restrict mu1,
-                                                   double* __restrict mu2, double* __restrict mu3) {
+TOFCAM_SIM_LOOP void TapMeans1(int n, const double* __restrict a, const double* __restrict b,
+                               const double* __restrict cp, const double* __restrict sp,
+                               double* __restrict mu0, double* __restrict mu1,
+                               double* __restrict mu2, double* __restrict mu3) {
   for (int c = 0; c < n; ++c) {
     mu0[c] = b[c] + a[c] * cp[c];
     mu1[c] = b[c] + a[c] * sp[c];
@@ -73,12 +71,13 @@ inline void PixelMean(const SensorConstants& k, float re, float im, float dc, fl
 // (cos, sin) of the measured phase including the systematic distance errors (fixed pattern,
 // wiggling, drift, exposure offset). Vectorised; pixels whose shift leaves the polynomial's range
 // are redone exactly.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void PixelMeans(
-    const SensorConstants& k, int n, const float* __restrict re, const float* __restrict im,
-    const float* __restrict dc, const float* __restrict sre, const float* __restrict sim,
-    const float* __restrict sdc, const float* __restrict fpn, double* __restrict a_out,
-    double* __restrict b_out, double* __restrict cos_out, double* __restrict sin_out,
-    double* __restrict shift) {
+TOFCAM_SIM_LOOP void PixelMeans(const SensorConstants& k, int n, const float* __restrict re,
+                                const float* __restrict im, const float* __restrict dc,
+                                const float* __restrict sre, const float* __restrict sim,
+                                const float* __restrict sdc, const float* __restrict fpn,
+                                double* __restrict a_out, double* __restrict b_out,
+                                double* __restrict cos_out, double* __restrict sin_out,
+                                double* __restrict shift) {
   for (int c = 0; c < n; ++c) {
     PixelMean(k, re[c], im[c], dc[c], sre[c], sim[c], sdc[c], fpn[c], false, a_out[c], b_out[c],
               cos_out[c], sin_out[c], shift[c]);
@@ -116,11 +115,12 @@ void TapMeans(int n, int slots, SensorRow& sr) {
 // return, beyond range), branch-free so it vectorises; the same tests as Grab's `differ` for
 // cos_bias >= 0 (the caller evaluates pixel by pixel otherwise): the angle between phasors a and
 // b exceeds the bias when dot < 0 or dot^2 < cos_bias^2 |a|^2 |b|^2.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void TruthCauses(
-    int n, double cos_bias2, double t_int_s, double mixed_span_m, double range_m,
-    const float* __restrict re, const float* __restrict im, const float* __restrict dre,
-    const float* __restrict dim, const float* __restrict sre, const float* __restrict sim,
-    const float* __restrict span, const float* __restrict td, std::uint16_t* __restrict bits) {
+TOFCAM_SIM_LOOP void TruthCauses(int n, double cos_bias2, double t_int_s, double mixed_span_m,
+                                 double range_m, const float* __restrict re,
+                                 const float* __restrict im, const float* __restrict dre,
+                                 const float* __restrict dim, const float* __restrict sre,
+                                 const float* __restrict sim, const float* __restrict span,
+                                 const float* __restrict td, std::uint16_t* __restrict bits) {
   const auto differ = [cos_bias2](double ar, double ai, double br, double bi) {
     const double dot = ar * br + ai * bi;
     const double norms2 = (ar * ar + ai * ai) * (br * br + bi * bi);
@@ -206,12 +206,14 @@ inline double RoundNonNegative(double x) {
 }
 
 // The vectorisable part of DemodulateRow; `redo` = 1 where the register is within 1e-5 of a tie.
-[[gnu::noinline]] TOFCAM_SIM_CLONES void DemodulateSpan(
-    int n, const float* __restrict t0, const float* __restrict t1, const float* __restrict t2,
-    const float* __restrict t3, bool clip, double full_well, double gain, int offset_register,
-    std::uint16_t* __restrict distance, std::uint16_t* __restrict amplitude,
-    std::uint16_t* __restrict intensity, std::uint8_t* __restrict saturated,
-    std::uint8_t* __restrict redo) {
+TOFCAM_SIM_LOOP void DemodulateSpan(int n, const float* __restrict t0, const float* __restrict t1,
+                                    const float* __restrict t2, const float* __restrict t3,
+                                    bool clip, double full_well, double gain, int offset_register,
+                                    std::uint16_t* __restrict distance,
+                                    std::uint16_t* __restrict amplitude,
+                                    std::uint16_t* __restrict intensity,
+                                    std::uint8_t* __restrict saturated,
+                                    std::uint8_t* __restrict redo) {
   const double two_pi = 2 * kPi;
   // Demodulate's clipping: a tap at or above the full well is set to it (with `clip`).
   auto clipped = [clip, full_well](float tap, bool& sat) {

@@ -173,6 +173,7 @@ TEST_P(RoundTrip, RecordThenPlayIsBitExact) {
   EXPECT_EQ(meta.has_source_flags, c.flags);
   EXPECT_EQ(meta.has_confidence, c.flags);
   EXPECT_EQ(meta.has_ground_truth, c.truth);
+  EXPECT_EQ(meta.has_truth_footprint, c.truth && c.footprint);
   for (int i = 4; i >= 0; --i) ExpectSameFrame(reader.Read(static_cast<std::size_t>(i)), frames[i]);
 
   PlaybackCamera camera(file);
@@ -443,9 +444,46 @@ TEST_F(HostileRecording, NaNsAndMissingOrWrongDatasets) {
               }),
               ErrorCode::kFormat);
   }
+  // Finite near with infinite far, and the reverse.
+  for (const float far : {std::numeric_limits<float>::infinity(), 2.0f}) {
+    EXPECT_EQ(EditAndOpen([far](hid_t f) {
+                const hid_t n = H5Dopen2(f, "truth/footprint_near_m", H5P_DEFAULT);
+                const hid_t d = H5Dopen2(f, "truth/footprint_far_m", H5P_DEFAULT);
+                std::vector<float> near_values(3 * 5 * 7, std::isinf(far) ? 1.0f : far + 1.0f);
+                if (!std::isinf(far)) {
+                  std::fill(near_values.begin(), near_values.end(),
+                            std::numeric_limits<float>::infinity());
+                }
+                std::vector<float> far_values(3 * 5 * 7, far);
+                H5Dwrite(n, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, near_values.data());
+                H5Dwrite(d, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, far_values.data());
+                H5Dclose(n);
+                H5Dclose(d);
+              }),
+              ErrorCode::kFormat);
+  }
   // The attribute says there is a footprint but a dataset is missing.
   EXPECT_EQ(EditAndOpen([](hid_t f) { H5Ldelete(f, "truth/footprint_far_m", H5P_DEFAULT); }),
             ErrorCode::kFormat);
+}
+
+TEST_F(HostileRecording, FilesWithoutTheFootprintAttributeReadWithoutFootprint) {
+  // Files written before the footprint existed have neither the attribute nor the datasets.
+  const fs::path file = MakeValid();
+  const hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  H5Adelete(f, "has_truth_footprint");
+  H5Ldelete(f, "truth/footprint_near_m", H5P_DEFAULT);
+  H5Ldelete(f, "truth/footprint_far_m", H5P_DEFAULT);
+  H5Fclose(f);
+  RecordingReader reader(file);
+  EXPECT_TRUE(reader.metadata().has_ground_truth);
+  EXPECT_FALSE(reader.metadata().has_truth_footprint);
+  const Frame frame = reader.Read(2);
+  ASSERT_TRUE(frame.truth.has_value());
+  EXPECT_FALSE(frame.truth->sigma_m.empty());
+  EXPECT_TRUE(frame.truth->footprint_near_m.empty());
+  EXPECT_TRUE(frame.truth->footprint_far_m.empty());
 }
 
 TEST_F(HostileRecording, FrameCountBeyondDataIsClampedToCompleteFrames) {

@@ -26,7 +26,9 @@ def test_recording_round_trip_is_bit_exact(tmp_path):
     for a, b in zip(grabbed, r):
         np.testing.assert_array_equal(a.distance, b.distance)
         np.testing.assert_array_equal(a.truth.sigma_m, b.truth.sigma_m)
+        np.testing.assert_array_equal(a.truth.footprint_near_m, b.truth.footprint_near_m)
         np.testing.assert_array_equal(a.truth.footprint_far_m, b.truth.footprint_far_m)
+    assert r.metadata.has_truth_footprint
     np.testing.assert_array_equal(r[-1].amplitude, grabbed[-1].amplitude)
     assert r.info(1).sequence == grabbed[1].info.sequence
     assert r.index_at_or_after(grabbed[1].info.timestamp_ns) == 1

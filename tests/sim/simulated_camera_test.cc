@@ -187,8 +187,8 @@ TEST(SimulatedCameraTest, EdgePixelsLandBetweenTheSurfaces) {
     EXPECT_NEAR(Err(f.distance(r, 90), f.truth->radial_distance_m(r, 90)), 0.0, 0.002);
     EXPECT_FALSE(f.truth->causes(r, 70).Has(Flag::kMixed));
     // Its footprint holds both surfaces: the board as its neighbour on the left sees it, the
-    // wall as the one on the right does (subsample rays lie within 0.4 px of those centres, a
-    // few mm of radial distance at these angles).
+    // wall as the one on the right does (its sub-rays lie 0.6-0.9 px from those centres, a few
+    // mm of radial distance near the optical axis).
     const GroundTruth& t = *f.truth;
     EXPECT_NEAR(t.footprint_near_m(r, 80), t.radial_distance_m(r, 79), 0.005) << r;
     EXPECT_NEAR(t.footprint_far_m(r, 80), t.radial_distance_m(r, 81), 0.005) << r;
@@ -568,6 +568,33 @@ TEST(SimulatedCameraTest, SameSeedGivesBitIdenticalFrames) {
   EXPECT_EQ(d.Grab()->distance, e.Grab()->distance);
 }
 
+TEST(SimulatedCameraTest, FootprintOfPixelsThatSeeNothingIsInfinite) {
+  // A 1 m board at 3 m in empty space: the image corners see nothing; pixels on the board's rim
+  // whose central ray misses it still have it in their footprint.
+  const Scene scene = InlineScene(
+      "materials: {w: {albedo: 0.6}}\nobjects:\n"
+      "  - {type: plane, material: w, size_m: [1, 1], position_m: [0, 0, 3]}\n");
+  SimulatorOptions o = SimulatorOptions::Ideal();
+  o.supersampling = 4;
+  SimulatedCamera cam(scene, ResolveCameraModel("sr2"), o);
+  const Frame f = *cam.Grab();
+  const GroundTruth& t = *f.truth;
+  const float inf = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(t.footprint_near_m(0, 0), inf);
+  EXPECT_EQ(t.footprint_far_m(0, 0), inf);
+  int rim = 0;
+  for (std::size_t i = 0; i < t.radial_distance_m.size(); ++i) {
+    if (std::isinf(t.radial_distance_m[i])) {
+      // Nothing on the central ray: either nothing at all, or the board within the footprint.
+      EXPECT_TRUE((std::isinf(t.footprint_near_m[i]) && std::isinf(t.footprint_far_m[i])) ||
+                  (t.footprint_near_m[i] > 2.99f && t.footprint_far_m[i] < 3.2f))
+          << i;
+      rim += std::isfinite(t.footprint_near_m[i]);
+    }
+  }
+  EXPECT_GT(rim, 0);
+}
+
 TEST(SimulatedCameraTest, MotionDuringExposureIsFlagged) {
   const Scene scene = InlineScene(
       "materials: {w: {albedo: 0.6}}\nobjects:\n"
@@ -586,6 +613,25 @@ TEST(SimulatedCameraTest, MotionDuringExposureIsFlagged) {
   };
   EXPECT_GT(count(true), 20);  // 10 m/s: 0.15 m during the 15 ms exposure
   EXPECT_EQ(count(false), 0);
+  // The footprint spans the whole exposure: pixels whose central ray sees only the wall at
+  // mid-exposure but whose taps saw the box (near side 1.3 m) have it as their nearest surface.
+  // The outer tap renderings lie 3/8 of the exposure either side of the middle: the box's
+  // edges move +-0.057 m, at 1.3 m 0.044 rad or 9 px (fx 204 px), on both sides of its 0.4 m
+  // (45 rows at fy 146 px): about 800 such pixels (954 measured once, with its side faces).
+  // Without motion the footprint is one rendering's: only the box's edge pixels (126 once).
+  auto swept = [&](bool motion) {
+    o.motion = motion;
+    SimulatedCamera cam(scene, ResolveCameraModel("sr2"), o);
+    const Frame f = *cam.Grab();
+    int n = 0;
+    for (std::size_t i = 0; i < f.truth->radial_distance_m.size(); ++i) {
+      n += f.truth->radial_distance_m[i] > 3.5f && f.truth->footprint_near_m[i] < 2.0f;
+    }
+    return n;
+  };
+  const int with_motion = swept(true), without = swept(false);
+  EXPECT_GT(with_motion, 500);
+  EXPECT_LT(without, 150);
 }
 
 TEST(SimulatedCameraTest, FrameTimingFollowsIntegrationTime) {

@@ -95,7 +95,9 @@ struct MetricFrame {
 };
 
 /// Throws Error(kInvalidArgument) unless the three channels (and truth, if any) share one size
-/// and the modulation frequency is positive and finite. `what` names the frame in the message.
+/// and the modulation frequency is positive and finite. The truth's sigma_m and footprint may be
+/// empty; the footprint's two images are both empty or both of the frame's size. `what` names the
+/// frame in the message.
 void ValidateFrame(const Frame& frame, const std::string& what = "frame");
 
 }  // namespace tofcam

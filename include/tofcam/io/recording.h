@@ -52,9 +52,10 @@ class RecordingWriter {
   RecordingWriter(const RecordingWriter&) = delete;
   RecordingWriter& operator=(const RecordingWriter&) = delete;
 
-  /// Appends one frame. The frame must match the camera's size (kMismatch otherwise) and must
-  /// have ground truth and source flags iff the first frame had them (kMismatch). Throws
-  /// Error(kIo) on write failure and Error(kInvalidArgument) after Close().
+  /// Appends one frame. The frame must match the camera's size (kMismatch otherwise), pass
+  /// ValidateFrame (kInvalidArgument), and have source flags, confidence, ground truth and the
+  /// truth's footprint iff the first frame had them (kMismatch); ground truth needs sigma_m
+  /// (kMismatch). Throws Error(kIo) on write failure and Error(kInvalidArgument) after Close().
   void Append(const Frame& frame);
   /// Flushes and closes; further Append() calls throw. Idempotent.
   void Close();
@@ -77,7 +78,9 @@ struct RecordingMetadata {
   std::string frame_camera_model;  ///< FrameInfo::camera_model of every frame.
   bool has_source_flags = false;   ///< Frames carry source_flags.
   bool has_ground_truth = false;   ///< Frames carry GroundTruth.
-  bool has_confidence = false;     ///< Frames carry the camera's confidence channel.
+  /// Their GroundTruth has footprint_near_m / _far_m (false for files written before those).
+  bool has_truth_footprint = false;
+  bool has_confidence = false;  ///< Frames carry the camera's confidence channel.
 };
 
 /// Random access to the frames of a recording. Opening reads and validates the metadata and the

@@ -69,7 +69,7 @@ struct FrameStats {
 /// depth edge that reads one of its two surfaces measures a real surface point within half a
 /// pixel of its ray, though metres from its central ray's surface: the central truth calls it
 /// wrong, this one right. A reading between the two surfaces (a flying pixel) is wrong under
-/// both. Always <= |measured - truth|.
+/// both. For a measurement that is not NaN, always <= |measured - truth|.
 [[nodiscard]] double FootprintErrorM(double measured_m, double truth_m, double near_m,
                                      double far_m) noexcept;
 
