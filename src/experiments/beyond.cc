@@ -141,6 +141,9 @@ struct Score {
   long long pixels = 0, rejected = 0;
   // Squared error of kept pixels within L per kErrorCauses entry, then "none of these".
   std::array<double, kErrorCauses.size() + 1> kept_sq_by_cause{};
+  // Good pixels (central truth) rejected, and how many of them carry each of the 16 flag bits.
+  long long false_alarms = 0;
+  std::array<long long, 16> false_alarm_bits{};
   long long beyond = 0, beyond_right = 0;  // surfaces beyond L at 20 MHz; kept within 5 cm
   long long frames = 0;
   double seconds = 0;
@@ -167,6 +170,10 @@ struct Score {
       beyond += beyond_range;
       beyond_right += beyond_range && !is_rejected && !is_bad;
       central.Add(is_bad, is_rejected, systematic, sigma_m[i], in_range, e);
+      if (is_rejected && !is_bad) {
+        ++false_alarms;
+        for (int b = 0; b < 16; ++b) false_alarm_bits[b] += (f.flags[i].bits() >> b) & 1u;
+      }
       if (!is_rejected && in_range && std::isfinite(e)) {
         std::size_t c = 0;
         while (c < kErrorCauses.size() && !(t.causes[i].bits() & kErrorCauses[c].second)) ++c;
@@ -191,6 +198,8 @@ struct Score {
     for (std::size_t c = 0; c < kept_sq_by_cause.size(); ++c) {
       kept_sq_by_cause[c] += o.kept_sq_by_cause[c];
     }
+    false_alarms += o.false_alarms;
+    for (int b = 0; b < 16; ++b) false_alarm_bits[b] += o.false_alarm_bits[b];
   }
   [[nodiscard]] double Precision() const { return central.Precision(rejected); }
   [[nodiscard]] double Recall() const { return central.Recall(); }
@@ -401,9 +410,33 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
     row.push_back(Mm(c.RmseInRange()));
     causes.rows.push_back(std::move(row));
   }
+  // Which flags the rejected good pixels carry (a pixel may carry several).
+  Table alarms{"beyond_false_alarms", {"method", "good pixels rejected"}, {}, true};
+  std::vector<int> alarm_bits;
+  for (int b = 0; b < 16; ++b) {
+    const auto flag = static_cast<Flag>(1u << b);
+    if (!(kRejectMask & (1u << b))) continue;
+    long long any = 0;
+    for (const Score& c : pooled) any += c.false_alarm_bits[b];
+    if (any == 0) continue;
+    alarm_bits.push_back(b);
+    alarms.columns.push_back(std::string(FlagName(flag)));
+  }
+  for (std::size_t k = 0; k < methods.size(); ++k) {
+    const Score& c = pooled[k];
+    std::vector<std::string> row = {methods[k].name, Pct(Ratio(c.false_alarms, c.pixels))};
+    for (const int b : alarm_bits) {
+      row.push_back(Pct(Ratio(c.false_alarm_bits[b], c.false_alarms)));
+      r.metrics[methods[k].name + ".false_alarm_share." +
+                std::string(FlagName(static_cast<Flag>(1u << b)))] =
+          Ratio(c.false_alarm_bits[b], c.false_alarms);
+    }
+    alarms.rows.push_back(std::move(row));
+  }
   r.tables.push_back(summary);
   r.tables.push_back(footprint);
   r.tables.push_back(causes);
+  r.tables.push_back(alarms);
   r.tables.push_back(per_scene);
 
   const auto metric = [&](std::size_t k, const std::string& key) {
@@ -486,7 +519,8 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << "). Both truths come from the same rendering; the footprint truth was added after "
           "the edge pixels were found to dominate the RMSE, and it lowers the F1 as well. The "
           "third table splits the kept pixels' squared error (central truth, within L) by the "
-          "truth's causes.";
+          "truth's causes (first match in the column order), the fourth shows which reject flags "
+          "the rejected good pixels (central truth) carry; a pixel may carry several.";
   r.text = text.str();
   for (const std::string key :
        {"f1", "ceiling_f1", "rmse_kept_within_l", "beyond_right", "kept", "footprint_f1",
