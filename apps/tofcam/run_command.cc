@@ -424,6 +424,7 @@ void RunRun(const RunOptions& o) {
   json["mean_intensity"] = Real(summary.mean_intensity);
   json["has_truth"] = summary.has_truth;
   json["rmse_m"] = Real(summary.rmse_m);
+  json["footprint_rmse_m"] = Real(summary.footprint_rmse_m);
   json["bad_removed_fraction"] = Real(summary.bad_removed_fraction);
   json["good_kept_fraction"] = Real(summary.good_kept_fraction);
   json["bad_pixels"] = summary.bad_pixels;

@@ -258,6 +258,9 @@ void BindResults(py::module_& m) {
       .def_readonly("has_truth", &FrameStats::has_truth)
       .def_readonly("truth_error_pixels", &FrameStats::truth_error_pixels)
       .def_readonly("rmse_m", &FrameStats::rmse_m, "RMSE of kept pixels against truth, m.")
+      .def_readonly("footprint_rmse_m", &FrameStats::footprint_rmse_m,
+                    "The same against the footprint truth (a pixel reading a surface inside its "
+                    "own area is right), m; NaN without a footprint.")
       .def_readonly("bad_pixels", &FrameStats::bad_pixels)
       .def_readonly("bad_removed", &FrameStats::bad_removed)
       .def_readonly("good_pixels", &FrameStats::good_pixels)

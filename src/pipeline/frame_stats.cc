@@ -161,6 +161,11 @@ FrameStats ComputeFrameStats(const MetricFrame& frame, const FrameStatsOptions& 
   const GroundTruth* truth = frame.truth ? &*frame.truth : nullptr;
   if (truth != nullptr) {
     RequireSize(truth->radial_distance_m.SameSize(distance), "truth.radial_distance_m");
+    if (!truth->footprint_near_m.empty()) {
+      RequireSize(
+          truth->footprint_near_m.SameSize(distance) && truth->footprint_far_m.SameSize(distance),
+          "truth footprint");
+    }
   }
 
   FrameStats s;
@@ -207,15 +212,31 @@ FrameStats ComputeFrameStats(const MetricFrame& frame, const FrameStatsOptions& 
     s.good_pixels = static_cast<int>(static_cast<std::int64_t>(n) - bad);
     s.good_kept = static_cast<int>(s.kept_pixels - bad_kept);
     s.truth_error_pixels = static_cast<int>(error_pixels);
+    const Image<float>& near = truth->footprint_near_m;
+    const Image<float>& far = truth->footprint_far_m;
+    if (!near.empty()) {
+      // The pixels of the RMSE above: kept, with a finite error against the central truth.
+      const float* d = distance.data();
+      const float* central = truth->radial_distance_m.data();
+      for (std::size_t i = 0; i < n; ++i) {
+        if ((flags[i].bits() & kRejectMask) != 0 || !std::isfinite(d[i] - central[i])) continue;
+        const double e = FootprintErrorM(d[i], central[i], near[i], far[i]);
+        s.footprint_sum_squared_error_m2 += e * e;
+      }
+    }
   }
   s.valid_fraction = Ratio(s.kept_pixels, s.pixels);
   s.mean_delta_l_m = Ratio(delta_l_sum, delta_l_count);
   if (truth != nullptr) {
     s.rmse_m = std::sqrt(Ratio(s.sum_squared_error_m2, s.truth_error_pixels));
+    s.footprint_rmse_m =
+        truth->footprint_near_m.empty()
+            ? kNaN
+            : std::sqrt(Ratio(s.footprint_sum_squared_error_m2, s.truth_error_pixels));
     s.bad_removed_fraction = Ratio(s.bad_removed, s.bad_pixels);
     s.good_kept_fraction = Ratio(s.good_kept, s.good_pixels);
   } else {
-    s.rmse_m = s.bad_removed_fraction = s.good_kept_fraction = kNaN;
+    s.rmse_m = s.footprint_rmse_m = s.bad_removed_fraction = s.good_kept_fraction = kNaN;
   }
   return s;
 }
@@ -272,6 +293,10 @@ void RunStatsAccumulator::Add(const FrameStats& s) noexcept {
   if (s.has_truth) {
     ++truth_frames_;
     squared_error_sum_ += s.sum_squared_error_m2;
+    if (!std::isnan(s.footprint_rmse_m)) {
+      footprint_squared_error_sum_ += s.footprint_sum_squared_error_m2;
+      ++footprint_frames_;
+    }
     error_pixels_ += s.truth_error_pixels;
     bad_pixels_ += s.bad_pixels;
     bad_removed_ += s.bad_removed;
@@ -291,12 +316,16 @@ RunSummary RunStatsAccumulator::Summary() const noexcept {
   r.good_pixels = good_pixels_;
   if (truth_frames_ > 0) {
     r.rmse_m = std::sqrt(Ratio(squared_error_sum_, static_cast<double>(error_pixels_)));
+    r.footprint_rmse_m =
+        footprint_frames_ == truth_frames_
+            ? std::sqrt(Ratio(footprint_squared_error_sum_, static_cast<double>(error_pixels_)))
+            : kNaN;
     r.bad_removed_fraction =
         Ratio(static_cast<double>(bad_removed_), static_cast<double>(bad_pixels_));
     r.good_kept_fraction =
         Ratio(static_cast<double>(good_kept_), static_cast<double>(good_pixels_));
   } else {
-    r.rmse_m = r.bad_removed_fraction = r.good_kept_fraction = kNaN;
+    r.rmse_m = r.footprint_rmse_m = r.bad_removed_fraction = r.good_kept_fraction = kNaN;
   }
   return r;
 }

@@ -265,6 +265,36 @@ TEST(FrameStatsTest, LaneWiseLoopsAgreeWithTheSequentialLoop) {
   EXPECT_GT(want.sum_squared_error_m2, 0.0);
 }
 
+TEST(FrameStatsTest, FootprintRmseOverTheSamePixels) {
+  // The hand frame's kept pixels with a finite error are 0 (error 0) and 1 (-0.10 m). Give
+  // pixel 1 a footprint that holds 2.00 m (an edge pixel reading its nearer surface) and pixel 0
+  // one of its own surface: the footprint RMSE is 0; the central one sqrt(0.01 / 2).
+  MetricFrame f = HandFrame();
+  EXPECT_TRUE(std::isnan(ComputeFrameStats(f).footprint_rmse_m));  // no footprint
+  f.truth->footprint_near_m = Image<float>(3, 2, kInf);
+  f.truth->footprint_far_m = Image<float>(3, 2, kInf);
+  f.truth->footprint_near_m[0] = f.truth->footprint_far_m[0] = 1.0f;
+  f.truth->footprint_near_m[1] = 2.0f;
+  f.truth->footprint_far_m[1] = 2.1f;
+  const FrameStats s = ComputeFrameStats(f);
+  EXPECT_NEAR(s.rmse_m, std::sqrt(0.01 / 2), 1e-6);
+  EXPECT_NEAR(s.footprint_rmse_m, 0.0, 1e-7);
+  // A reading between the two surfaces (a flying pixel) is wrong under both truths.
+  f.radial_distance_m[1] = 2.05f;
+  f.truth->footprint_near_m[1] = 1.5f;
+  f.truth->footprint_far_m[1] = 2.6f;
+  EXPECT_NEAR(ComputeFrameStats(f).footprint_rmse_m, std::sqrt(0.05 * 0.05 / 2), 1e-6);
+  // Pooled: NaN once a frame with truth has no footprint.
+  RunStatsAccumulator run;
+  run.Add(s);
+  EXPECT_NEAR(run.Summary().footprint_rmse_m, 0.0, 1e-7);
+  run.Add(ComputeFrameStats(HandFrame()));
+  EXPECT_TRUE(std::isnan(run.Summary().footprint_rmse_m));
+  // A footprint of the wrong size is refused.
+  f.truth->footprint_far_m = Image<float>(2, 2);
+  EXPECT_THROW((void)ComputeFrameStats(f), Error);
+}
+
 TEST(FrameStatsTest, FootprintErrorIsTheDistanceToTheNearestSurfaceInTheFootprint) {
   const double inf = std::numeric_limits<double>::infinity();
   const double nan = std::numeric_limits<double>::quiet_NaN();

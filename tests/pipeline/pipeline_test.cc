@@ -651,6 +651,9 @@ TEST_F(RunCommandTest, RunsFramesAndSummaryAgreesWithTheCsv) {
               static_cast<double>(bad_removed) / bad, 1e-9);
   EXPECT_TRUE(summary.at("has_truth").get<bool>());
   EXPECT_GT(summary.at("rmse_m").get<double>(), 0.0);
+  // The simulator gives a footprint; its error is at most the central one pixel by pixel.
+  EXPECT_LE(summary.at("footprint_rmse_m").get<double>(), summary.at("rmse_m").get<double>());
+  EXPECT_GE(summary.at("footprint_rmse_m").get<double>(), 0.0);
   EXPECT_GT(summary.at("mean_frames_per_s").get<double>(), 0.0);
   EXPECT_EQ(summary.at("controller").get<std::string>(), "may-incremental");  // the default
   EXPECT_TRUE(fs::exists(out / "frame_000000_raw.png"));

@@ -54,6 +54,12 @@ struct FrameStats {
   int truth_error_pixels = 0;         ///< Kept pixels with a finite error (used for the RMSE).
   double sum_squared_error_m2 = 0.0;  ///< Σ error² over those pixels, m² (for pooling).
   double rmse_m = 0.0;                ///< sqrt(sum_squared_error_m2 / truth_error_pixels), m.
+  /// Σ FootprintErrorM² over the same pixels, m², when the truth has a footprint
+  /// (GroundTruth::footprint_near_m / _far_m); 0 otherwise.
+  double footprint_sum_squared_error_m2 = 0.0;
+  /// sqrt(footprint_sum_squared_error_m2 / truth_error_pixels), m: the RMSE with a pixel that
+  /// reads a surface inside its own area counted right; NaN without a footprint. <= rmse_m.
+  double footprint_rmse_m = 0.0;
   int bad_pixels = 0;                 ///< Bad pixels (see the file comment).
   int bad_removed = 0;                ///< Bad pixels with a reject bit.
   int good_pixels = 0;                ///< Good pixels.
@@ -92,11 +98,14 @@ struct FrameStats {
 /// with many pixels weighs more than a nearly empty one.
 struct RunSummary {
   std::uint64_t frames = 0;
-  double mean_valid_fraction = 0.0;   ///< Mean over frames of valid_fraction.
-  double mean_delta_l_m = 0.0;        ///< Mean over frames of mean_delta_l_m (finite ones), m.
-  double mean_intensity = 0.0;        ///< Mean over frames of mean_intensity (finite ones).
-  bool has_truth = false;             ///< Every frame had ground truth.
-  double rmse_m = 0.0;                ///< RMSE of kept pixels vs truth over all frames, m.
+  double mean_valid_fraction = 0.0;  ///< Mean over frames of valid_fraction.
+  double mean_delta_l_m = 0.0;       ///< Mean over frames of mean_delta_l_m (finite ones), m.
+  double mean_intensity = 0.0;       ///< Mean over frames of mean_intensity (finite ones).
+  bool has_truth = false;            ///< Every frame had ground truth.
+  double rmse_m = 0.0;               ///< RMSE of kept pixels vs truth over all frames, m.
+  /// The same against the footprint truth (FrameStats::footprint_rmse_m), m; NaN unless every
+  /// frame with truth had a footprint.
+  double footprint_rmse_m = 0.0;
   double bad_removed_fraction = 0.0;  ///< Σ bad_removed / Σ bad_pixels.
   double good_kept_fraction = 0.0;    ///< Σ good_kept / Σ good_pixels.
   std::int64_t bad_pixels = 0;
@@ -119,6 +128,8 @@ class RunStatsAccumulator {
   double intensity_sum_ = 0.0;
   std::uint64_t intensity_frames_ = 0;
   double squared_error_sum_ = 0.0;
+  double footprint_squared_error_sum_ = 0.0;
+  std::uint64_t footprint_frames_ = 0;
   std::int64_t error_pixels_ = 0;
   std::int64_t bad_pixels_ = 0;
   std::int64_t bad_removed_ = 0;
