@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -14,8 +15,8 @@
 #include "tofcam/core/units.h"
 
 // The hand-written AVX2 table kernel (Eq1IntervalsAvx2): x86-64 GCC or clang, and not under
-// AddressSanitizer, which does not check the addresses of gathers (the baseline loop's table
-// reads stay checked there).
+// AddressSanitizer (hot_loop.h sets TOFCAM_NO_CLONES there), so that the sanitizer build checks
+// the portable loop the kernel is tested against.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
 #include <immintrin.h>
 #define TOFCAM_EQ1_AVX2 1
@@ -369,55 +370,83 @@ TOFCAM_HOT_LOOP void Eq1Table(std::size_t n, float range, float bias, const floa
 
 #if TOFCAM_EQ1_AVX2
 // Eq1Table with the interval table (g_j, g_{j+1} - g_j): the two values a pixel needs are one
-// 64-bit element, so 8 pixels take two 4-element gathers instead of two 8-element ones (16
-// loads): eq. 1 + table 27 -> 23 us per SR-2 frame on the 2-core Zen 4 test machine
-// (docs/benchmarks.md). Written with intrinsics because GCC does not turn the paired reads into
-// 64-bit gathers. The same float operations in the same order as Eq1Table, so the same values bit
-// for bit (tests/calibration/offset_calibration_test.cc); this file is compiled with
-// -ffp-contract=off so that no compiler fuses either form's multiply-add into an FMA where the
-// other is not (clang contracts the scalar loop's expression, never the separate intrinsics).
+// 64-bit element. Written with intrinsics because GCC does not turn the paired reads into 64-bit
+// reads; the same float operations in the same order as Eq1Table, so the same values bit for bit
+// (tests/calibration/offset_calibration_test.cc). This file is compiled with -ffp-contract=off so
+// that no compiler fuses either form's multiply-add into an FMA where the other is not (clang
+// contracts the scalar loop's expression, never the separate intrinsics).
+//
+// Two passes over blocks of kBlock pixels. Pass 1 computes eq. 1's l, the table index k and the
+// fraction t; pass 2 reads the pairs with scalar 64-bit loads and finishes. In one pass each
+// group of 8 pixels is a chain of about 90 cycles (the table, 60 KB at 1 mm, is read from L2)
+// and too few groups fit in the reorder buffer to hide it. The pairs are read with scalar loads:
+// the machine's vpgatherdq is slower than eight loads (a stand-alone test: 11-16 us against 8-9.5
+// us per SR-2 frame). Eq. 1 + table per SR-2 frame on the 2-core Zen 4 test machine, three
+// interleaved `tofcam bench` runs each: 24-32 us with two gathers in one pass, 14-19 us now
+// (docs/benchmarks.md).
 // Returns the pixels done (a multiple of 8); the caller finishes the rest with Eq1Table.
 __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
-    std::size_t n, float range, float bias, const float* __restrict o,
-    const PixelFlags* __restrict f, float* __restrict d, const float* __restrict intervals,
-    float origin, float inv_step, float last, int last_segment) {
+    std::size_t n, float range, float bias, const float* __restrict o, PixelFlags* __restrict f,
+    const PixelFlags* __restrict extra_flags, float* __restrict d,
+    const float* __restrict intervals, float origin, float inv_step, float last, int last_segment) {
+  constexpr std::size_t kBlock = 256;
+  alignas(32) float l_block[kBlock];
+  alignas(32) float t_block[kBlock];
+  alignas(32) std::int32_t k_block[kBlock];
   const __m256 vrange = _mm256_set1_ps(range), vbias = _mm256_set1_ps(bias);
   const __m256 vorigin = _mm256_set1_ps(origin), vinv = _mm256_set1_ps(inv_step);
   const __m256 vlast = _mm256_set1_ps(last), zero = _mm256_setzero_ps();
   const __m256i vseg = _mm256_set1_epi32(last_segment);
   const __m128i invalid = _mm_set1_epi16(static_cast<short>(Flag::kInvalid));
   const auto* pairs = reinterpret_cast<const long long*>(intervals);
-  std::size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    const __m256 m = _mm256_loadu_ps(d + i);
-    __m256 l = _mm256_add_ps(_mm256_sub_ps(m, _mm256_loadu_ps(o + i)), vbias);
-    // l -= l >= range ? range : 0, twice.
-    l = _mm256_sub_ps(l, _mm256_and_ps(_mm256_cmp_ps(l, vrange, _CMP_GE_OQ), vrange));
-    l = _mm256_sub_ps(l, _mm256_and_ps(_mm256_cmp_ps(l, vrange, _CMP_GE_OQ), vrange));
-    __m256 x = _mm256_mul_ps(_mm256_sub_ps(l, vorigin), vinv);
-    x = _mm256_and_ps(_mm256_cmp_ps(x, zero, _CMP_GT_OQ), x);  // x > 0 ? x : 0 (NaN -> 0)
-    x = _mm256_min_ps(x, vlast);  // x < last ? x : last, as std::min(x, last)
-    const __m256i k = _mm256_min_epi32(_mm256_cvttps_epi32(x), vseg);
-    const __m256 t = _mm256_sub_ps(x, _mm256_cvtepi32_ps(k));
-    // Pixels 0-3 and 4-7: (g0, dg) pairs, deinterleaved into g0 and dg in pixel order.
-    const __m256 lo =
-        _mm256_castsi256_ps(_mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(k), 8));
-    const __m256 hi =
-        _mm256_castsi256_ps(_mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(k, 1), 8));
-    const __m256 g0 = _mm256_castpd_ps(_mm256_permute4x64_pd(
-        _mm256_castps_pd(_mm256_shuffle_ps(lo, hi, _MM_SHUFFLE(2, 0, 2, 0))), 0xD8));
-    const __m256 dg = _mm256_castpd_ps(_mm256_permute4x64_pd(
-        _mm256_castps_pd(_mm256_shuffle_ps(lo, hi, _MM_SHUFFLE(3, 1, 3, 1))), 0xD8));
-    const __m256 corr = _mm256_add_ps(g0, _mm256_mul_ps(t, dg));
-    __m256 v = _mm256_add_ps(_mm256_sub_ps(l, corr), vrange);
-    v = _mm256_sub_ps(v, _mm256_and_ps(_mm256_cmp_ps(v, vrange, _CMP_GE_OQ), vrange));
-    // kInvalid pixels keep their value.
-    const __m128i flags = _mm_loadu_si128(reinterpret_cast<const __m128i*>(f + i));
-    const __m128i bad16 = _mm_cmpeq_epi16(_mm_and_si128(flags, invalid), invalid);
-    const __m256 bad = _mm256_castsi256_ps(_mm256_cvtepi16_epi32(bad16));
-    _mm256_storeu_ps(d + i, _mm256_blendv_ps(v, m, bad));
+  const std::size_t done = n / 8 * 8;
+  for (std::size_t begin = 0; begin < done; begin += kBlock) {
+    const std::size_t len = std::min(kBlock, done - begin);
+    const float* bo = o + begin;
+    PixelFlags* bf = f + begin;
+    float* bd = d + begin;
+    for (std::size_t i = 0; i < len; i += 8) {
+      __m256 l =
+          _mm256_add_ps(_mm256_sub_ps(_mm256_loadu_ps(bd + i), _mm256_loadu_ps(bo + i)), vbias);
+      // l -= l >= range ? range : 0, twice.
+      l = _mm256_sub_ps(l, _mm256_and_ps(_mm256_cmp_ps(l, vrange, _CMP_GE_OQ), vrange));
+      l = _mm256_sub_ps(l, _mm256_and_ps(_mm256_cmp_ps(l, vrange, _CMP_GE_OQ), vrange));
+      __m256 x = _mm256_mul_ps(_mm256_sub_ps(l, vorigin), vinv);
+      x = _mm256_and_ps(_mm256_cmp_ps(x, zero, _CMP_GT_OQ), x);  // x > 0 ? x : 0 (NaN -> 0)
+      x = _mm256_min_ps(x, vlast);  // x < last ? x : last, as std::min(x, last)
+      const __m256i k = _mm256_min_epi32(_mm256_cvttps_epi32(x), vseg);
+      _mm256_store_ps(l_block + i, l);
+      _mm256_store_ps(t_block + i, _mm256_sub_ps(x, _mm256_cvtepi32_ps(k)));
+      _mm256_store_si256(reinterpret_cast<__m256i*>(k_block + i), k);
+    }
+    for (std::size_t i = 0; i < len; i += 8) {
+      // The (g0, dg) pairs of pixels 0-7, deinterleaved into g0 and dg.
+      const std::int32_t* k = k_block + i;
+      const __m128i p01 = _mm_set_epi64x(pairs[k[1]], pairs[k[0]]);
+      const __m128i p23 = _mm_set_epi64x(pairs[k[3]], pairs[k[2]]);
+      const __m128i p45 = _mm_set_epi64x(pairs[k[5]], pairs[k[4]]);
+      const __m128i p67 = _mm_set_epi64x(pairs[k[7]], pairs[k[6]]);
+      // Pixels 0, 1, 4, 5 and 2, 3, 6, 7, so that the in-lane shuffles give pixel order.
+      const __m256 lo = _mm256_castsi256_ps(_mm256_set_m128i(p45, p01));
+      const __m256 hi = _mm256_castsi256_ps(_mm256_set_m128i(p67, p23));
+      const __m256 g0 = _mm256_shuffle_ps(lo, hi, _MM_SHUFFLE(2, 0, 2, 0));
+      const __m256 dg = _mm256_shuffle_ps(lo, hi, _MM_SHUFFLE(3, 1, 3, 1));
+      const __m256 corr = _mm256_add_ps(g0, _mm256_mul_ps(_mm256_load_ps(t_block + i), dg));
+      __m256 v = _mm256_add_ps(_mm256_sub_ps(_mm256_load_ps(l_block + i), corr), vrange);
+      v = _mm256_sub_ps(v, _mm256_and_ps(_mm256_cmp_ps(v, vrange, _CMP_GE_OQ), vrange));
+      // kInvalid pixels (before the calibration's flags are OR-ed in) keep their value.
+      auto* flags_at = reinterpret_cast<__m128i*>(bf + i);
+      const __m128i flags = _mm_loadu_si128(flags_at);
+      const __m128i bad16 = _mm_cmpeq_epi16(_mm_and_si128(flags, invalid), invalid);
+      const __m256 bad = _mm256_castsi256_ps(_mm256_cvtepi16_epi32(bad16));
+      _mm256_storeu_ps(bd + i, _mm256_blendv_ps(v, _mm256_loadu_ps(bd + i), bad));
+      if (extra_flags != nullptr) {
+        const auto* extra = reinterpret_cast<const __m128i*>(extra_flags + begin + i);
+        _mm_storeu_si128(flags_at, _mm_or_si128(flags, _mm_loadu_si128(extra)));
+      }
+    }
   }
-  return i;
+  return done;
 }
 
 bool HasAvx2() {
@@ -430,13 +459,15 @@ bool HasAvx2() {
 
 void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t n, float* d,
                    PixelFlags* f) {
+  std::size_t done = 0;  // pixels whose calibration flags are OR-ed in already
   if (plan.table == nullptr) {
     Eq1(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, d);
   } else {
-    std::size_t done = 0;
 #if TOFCAM_EQ1_AVX2
     if (plan.table_intervals != nullptr && HasAvx2()) {
-      done = Eq1IntervalsAvx2(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, d,
+      // Also ORs the calibration's flags into its pixels.
+      const PixelFlags* extra = plan.pixel_flags == nullptr ? nullptr : plan.pixel_flags + begin;
+      done = Eq1IntervalsAvx2(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, extra, d,
                               plan.table_intervals, plan.table_origin_m, plan.table_inv_step,
                               plan.table_last, plan.table_last_segment);
     }
@@ -445,7 +476,9 @@ void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t n
              plan.table->values_m.data(), plan.table_origin_m, plan.table_inv_step, plan.table_last,
              plan.table_last_segment);
   }
-  if (plan.pixel_flags != nullptr) kernels::OrFlags(n, f, plan.pixel_flags + begin);
+  if (plan.pixel_flags != nullptr) {
+    kernels::OrFlags(n - done, f + done, plan.pixel_flags + begin + done);
+  }
 }
 
 const DenseDistanceCorrection* CachedTable(const OffsetCalibration& calibration, double range_m) {

@@ -349,6 +349,9 @@ void EveryPixelIsEquationOneThenTheTable(const DistanceCorrection& g) {
   const int w = 157, h = 123;
   OffsetCalibration c = MakeCalibration(w, h, 0.0f);
   c.distance_correction = g;
+  // The calibration's own flags are OR-ed in (in the vector loop and in its tail); its kInvalid
+  // does not stop the correction: only the frame's flags before the OR decide that.
+  c.pixel_flags = Image<PixelFlags>(w, h);
   MetricFrame m = MakeFrame(w, h, 0.0f);
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> distance(0.0f, static_cast<float>(kL20) * 0.999999f);
@@ -357,6 +360,8 @@ void EveryPixelIsEquationOneThenTheTable(const DistanceCorrection& g) {
     m.radial_distance_m[i] = distance(rng);
     c.offset_m[i] = offset(rng);
     if (i % 13 == 0) m.flags[i] = PixelFlags(Flag::kInvalid);
+    if (i % 7 == 0) c.pixel_flags[i] = PixelFlags(Flag::kInvalid);
+    if (i % 11 == 0) c.pixel_flags[i].Set(Flag::kSaturated);
   }
   m.radial_distance_m[5] = std::nanf("");  // not invalid: NaN in, NaN out, no stray read
   const MetricFrame l = ApplyCalibration(m, c);
@@ -376,6 +381,7 @@ void EveryPixelIsEquationOneThenTheTable(const DistanceCorrection& g) {
     } else {
       ASSERT_EQ(l.radial_distance_m[i], expected) << i;
     }
+    ASSERT_EQ(l.flags[i], m.flags[i] | c.pixel_flags[i]) << i;
   }
 }
 
