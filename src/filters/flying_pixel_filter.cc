@@ -23,7 +23,7 @@ namespace {
 // pixels: depth edges), in the same order of float operations as a full evaluation (horizontal
 // sums per row, then rows up + mid + down), so the result is bit for bit that of the rule.
 //
-// Rows are prepared once into a ring of three padded rows: weight (1 usable, 0 not), amplitude
+// Rows are prepared once into a ring of four padded rows: weight (1 usable, 0 not), amplitude
 // (0 if unusable), and the distance for the minimum (+inf if unusable) and the maximum (-inf).
 // A neutral row (weight 0, amplitude 0, distances that never win) stands above the first and
 // below the last row. Reused per thread so a stable frame size allocates nothing.
@@ -34,10 +34,16 @@ struct Prepared {
   float* hi;
 };
 
+// Ring slots: four rows (the row above, the row or two rows decided, the row below) and a
+// neutral slot.
+constexpr int kRingSlots = 4;
+constexpr int kNeutral = kRingSlots;
+constexpr int kSlots = kRingSlots + 1;
+
 struct Scratch {
-  std::vector<float> prepared;  // 4 slots (3 ring rows + neutral) x 4 streams x (w + 2)
-  std::vector<float> minmax;    // 4 slots x 2 streams (3-min, 3-max) x w
-  std::vector<float> sums;      // 4 slots x 3 streams (count, Σa, Σa²) x w, computed on demand
+  std::vector<float> prepared;  // kSlots x 4 streams x (w + 2)
+  std::vector<float> minmax;    // kSlots x 2 streams (3-min, 3-max) x w
+  std::vector<float> sums;      // kSlots x 3 streams (count, Σa, Σa²) x w, computed on demand
   std::vector<std::uint8_t> candidate;  // one row, padded to a multiple of 8
   std::vector<PixelFlags> echo_sink;    // one row
 };
@@ -165,6 +171,53 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
   return echo != nullptr ? rows(std::true_type{}) : rows(std::false_type{});
 }
 
+// DecideRow for two rows at once, the mid row m and the row v below it (3-min / 3-max rows u, m,
+// v, x from the row above m to the row below v, their horizontal sums; cm, cv the two rows'
+// weights). Rows m and v are each read once for both output rows: 24 streams for two rows
+// instead of 36. The same float operations per pixel as DecideRow. Returns the pixels of row v
+// that passed the distance conditions (for the next row's form). With an AVX-512 clone: in the
+// AVX2 clone the 28 pointers and the thresholds spill out of 16 vector registers and the loop
+// is no faster than DecideRow twice; with 32 registers the filter takes about 12 % less time on
+// noisy frames (filters_bench, ten interleaved runs, SR-2 and 1 MP; docs/benchmarks.md).
+TOFCAM_HOT_LOOP_WIDE std::uint32_t DecideTwoRows(
+    int w, const Thresholds& t, const float* __restrict lu, const float* __restrict lm,
+    const float* __restrict lv, const float* __restrict lx, const float* __restrict hu,
+    const float* __restrict hm, const float* __restrict hv, const float* __restrict hx,
+    const float* __restrict dm, const float* __restrict dv, const float* __restrict cm,
+    const float* __restrict cv, const float* __restrict nu, const float* __restrict nm,
+    const float* __restrict nv, const float* __restrict nx, const float* __restrict su,
+    const float* __restrict sm, const float* __restrict sv, const float* __restrict sx,
+    const float* __restrict qu, const float* __restrict qm, const float* __restrict qv,
+    const float* __restrict qx, PixelFlags* __restrict fm, PixelFlags* __restrict fv,
+    PixelFlags* __restrict em, PixelFlags* __restrict ev) {
+  const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
+  // Inlined into each clone (otherwise GCC compiles the lambda once, for the baseline).
+  auto rows = [&](auto with_echo) __attribute__((always_inline)) {
+    std::uint32_t count = 0;
+    for (int c = 0; c < w; ++c) {
+      const float l_m = lm[c], l_v = lv[c], h_m = hm[c], h_v = hv[c];
+      const float n_m = nm[c], n_v = nv[c], s_m = sm[c], s_v = sv[c], q_m = qm[c], q_v = qv[c];
+      const unsigned pass_m = DistancePass(lu[c], l_m, l_v, hu[c], h_m, h_v, dm[c], cm[c], t);
+      const unsigned pass_v = DistancePass(l_m, l_v, lx[c], h_m, h_v, hx[c], dv[c], cv[c], t);
+      count += pass_v;
+      const unsigned flying_m =
+          pass_m & static_cast<unsigned>(
+                       ContrastAtLeast(nu[c] + n_m + n_v, su[c] + s_m + s_v, qu[c] + q_m + q_v, t));
+      const unsigned flying_v =
+          pass_v & static_cast<unsigned>(
+                       ContrastAtLeast(n_m + n_v + nx[c], s_m + s_v + sx[c], q_m + q_v + qx[c], t));
+      fm[c] |= PixelFlags(static_cast<std::uint16_t>(flying_m * bit));
+      fv[c] |= PixelFlags(static_cast<std::uint16_t>(flying_v * bit));
+      if constexpr (decltype(with_echo)::value) {
+        em[c] |= PixelFlags(static_cast<std::uint16_t>(flying_m * bit));
+        ev[c] |= PixelFlags(static_cast<std::uint16_t>(flying_v * bit));
+      }
+    }
+    return count;
+  };
+  return em != nullptr ? rows(std::true_type{}) : rows(std::false_type{});
+}
+
 // The amplitude contrast test of one candidate at column c (rows u, m, v of prepared weights and
 // amplitudes).
 bool HighContrast(int c, const Thresholds& t, const Prepared& u, const Prepared& m,
@@ -192,41 +245,42 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   auto skewed = [](std::size_t n) { return (n + 15) / 16 * 16 + 16; };
   const std::size_t pw = skewed(sw + 2), mw = skewed(sw);
   thread_local Scratch s;
-  s.prepared.resize(4 * 4 * pw);
-  s.minmax.resize(4 * 2 * mw);
-  s.sums.assign(4 * 3 * mw, 0.0f);  // the neutral slot's sums stay 0
+  s.prepared.resize(kSlots * 4 * pw);
+  s.minmax.resize(kSlots * 2 * mw);
+  s.sums.assign(kSlots * 3 * mw, 0.0f);  // the neutral slot's sums stay 0
   s.candidate.assign((sw + 7) / 8 * 8, 0);
   // Without an echo image the sparse rows echo into a scratch row nobody reads (the dense rows
   // skip the echo).
   s.echo_sink.resize(sw);
-  // Slot k in 0..3 (3 = neutral); pointers at column 0 of the padded rows.
+  // Slot k in 0..kNeutral; pointers at column 0 of the padded rows.
   auto prepared = [&](int k) {
     float* base = s.prepared.data() + static_cast<std::size_t>(k) * 4 * pw + 1;
     return Prepared{base, base + pw, base + 2 * pw, base + 3 * pw};
   };
   auto lo_of = [&](int k) { return s.minmax.data() + static_cast<std::size_t>(k) * 2 * mw; };
   auto hi_of = [&](int k) { return lo_of(k) + mw; };
-  for (int k = 0; k < 4; ++k) {
+  for (int k = 0; k < kSlots; ++k) {
     const Prepared p = prepared(k);
     // Pads (and the whole neutral row): weight 0, amplitude 0, distances that never win.
-    const int first = k == 3 ? -1 : w, last = w;
+    const int first = k == kNeutral ? -1 : w, last = w;
     for (int c = -1; c <= last; ++c) {
-      if (k != 3 && c >= 0 && c < first) continue;
+      if (k != kNeutral && c >= 0 && c < first) continue;
       p.w[c] = 0.0f;
       p.a[c] = 0.0f;
       p.lo[c] = kInf;
       p.hi[c] = -kInf;
     }
   }
-  std::fill(lo_of(3), lo_of(3) + sw, kInf);
-  std::fill(hi_of(3), hi_of(3) + sw, -kInf);
+  std::fill(lo_of(kNeutral), lo_of(kNeutral) + sw, kInf);
+  std::fill(hi_of(kNeutral), hi_of(kNeutral) + sw, -kInf);
   const PixelFlags* prior_px = PriorOrZeros(prior, frame.radial_distance_m.size());
   auto sums_of = [&](int k) { return s.sums.data() + static_cast<std::size_t>(k) * 3 * mw; };
-  int sums_row[3] = {-1, -1, -1};  // the row whose sums slot k holds
-  // Slot k's sums for row r (k = 3: the neutral row), computed once per row when first needed.
+  int sums_row[kRingSlots] = {-1, -1, -1, -1};  // the row whose sums slot k holds
+  // Slot k's sums for row r (k = kNeutral: the neutral row), computed once per row when first
+  // needed.
   auto sums = [&](int k, int r) {
     float* n = sums_of(k);
-    if (k != 3 && sums_row[k] != r) {
+    if (k != kNeutral && sums_row[k] != r) {
       const Prepared p = prepared(k);
       HorizontalSums(w, p.w, p.a, n, n + mw, n + 2 * mw);
       sums_row[k] = r;
@@ -234,11 +288,12 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
     return n;
   };
 
+  auto slot = [h](int r) { return r >= 0 && r < h ? r % kRingSlots : kNeutral; };
   auto prepare_row = [&](int r) {
-    const Prepared p = prepared(r % 3);
+    const Prepared p = prepared(slot(r));
     PrepareRow(w, frame.radial_distance_m.Row(r).data(), frame.amplitude.Row(r).data(),
                prior_px + static_cast<std::size_t>(r) * sw, p.w, p.a, p.lo, p.hi);
-    HorizontalMinMax(w, p.lo, p.hi, lo_of(r % 3), hi_of(r % 3));
+    HorizontalMinMax(w, p.lo, p.hi, lo_of(slot(r)), hi_of(slot(r)));
   };
 
   const Thresholds t{
@@ -251,7 +306,7 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   bool dense = false;  // the previous row had many candidates
   for (int r = 0; r < h; ++r) {
     if (r + 1 < h) prepare_row(r + 1);
-    const int ku = r > 0 ? (r - 1) % 3 : 3, km = r % 3, kv = r + 1 < h ? (r + 1) % 3 : 3;
+    const int ku = slot(r - 1), km = slot(r), kv = slot(r + 1);
     const Prepared u = prepared(ku), m = prepared(km), v = prepared(kv);
     const float* d = frame.radial_distance_m.Row(r).data();
     PixelFlags* f = out.Row(r).data();
@@ -267,6 +322,25 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
                     echo != nullptr ? e : nullptr);
       dense = 16 * count > sw;
     };
+    if (dense && r + 1 < h) {
+      // Rows r and r + 1 together; row r + 2 (or the neutral row) is the lower neighbour.
+      if (r + 2 < h) prepare_row(r + 2);
+      const int kx = slot(r + 2);
+      const float* nu = sums(ku, r - 1);
+      const float* nm = sums(km, r);
+      const float* nv = sums(kv, r + 1);
+      const float* nx = sums(kx, r + 2);
+      const bool with_echo = echo != nullptr;
+      PixelFlags* f2 = out.Row(r + 1).data();
+      const std::size_t count = DecideTwoRows(
+          w, t, lo_of(ku), lo_of(km), lo_of(kv), lo_of(kx), hi_of(ku), hi_of(km), hi_of(kv),
+          hi_of(kx), d, frame.radial_distance_m.Row(r + 1).data(), m.w, v.w, nu, nm, nv, nx,
+          nu + mw, nm + mw, nv + mw, nx + mw, nu + 2 * mw, nm + 2 * mw, nv + 2 * mw, nx + 2 * mw, f,
+          f2, with_echo ? e : nullptr, with_echo ? echo->Row(r + 1).data() : nullptr);
+      dense = 16 * count > sw;
+      ++r;
+      continue;
+    }
     if (dense) {
       decide_row();
       continue;
