@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -378,12 +379,14 @@ TOFCAM_HOT_LOOP void Eq1Table(std::size_t n, float range, float bias, const floa
 //
 // Two passes over blocks of kBlock pixels. Pass 1 computes eq. 1's l, the table index k and the
 // fraction t; pass 2 reads the pairs with scalar 64-bit loads and finishes. In one pass each
-// group of 8 pixels is a chain of about 90 cycles (the table, 60 KB at 1 mm, is read from L2)
-// and too few groups fit in the reorder buffer to hide it. The pairs are read with scalar loads:
-// the machine's vpgatherdq is slower than eight loads (a stand-alone test: 11-16 us against 8-9.5
-// us per SR-2 frame). Eq. 1 + table per SR-2 frame on the 2-core Zen 4 test machine, three
-// interleaved `tofcam bench` runs each: 24-32 us with two gathers in one pass, 14-19 us now
-// (docs/benchmarks.md).
+// group of 8 pixels is one long dependent chain (eq. 1, index, moves to integer registers, an L2
+// read of the 60 KB table, shuffles, the rest: by count about 90 cycles), and too few groups fit
+// in the reorder buffer to overlap them; one pass with scalar loads took 21 us in
+// calibration_bench, two passes 19 us (and 14-16 us in tofcam bench). The pairs are read with
+// scalar loads because the machine's vpgatherdq is slower than eight loads (a stand-alone test:
+// 11-16 us against 8-9.5 us per SR-2 frame). Eq. 1 + table per SR-2 frame on the 2-core Zen 4
+// test machine, three interleaved `tofcam bench` runs each: 22.8-23.8 us with two gathers in one
+// pass, 14.0-14.4 us now (docs/benchmarks.md).
 // Returns the pixels done (a multiple of 8); the caller finishes the rest with Eq1Table.
 __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
     std::size_t n, float range, float bias, const float* __restrict o, PixelFlags* __restrict f,
@@ -398,7 +401,12 @@ __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
   const __m256 vlast = _mm256_set1_ps(last), zero = _mm256_setzero_ps();
   const __m256i vseg = _mm256_set1_epi32(last_segment);
   const __m128i invalid = _mm_set1_epi16(static_cast<short>(Flag::kInvalid));
-  const auto* pairs = reinterpret_cast<const long long*>(intervals);
+  // Pair j (two floats) as one 64-bit integer; memcpy, not a cast, keeps the read well defined.
+  const auto pair = [intervals](std::int32_t j) {
+    long long v;
+    std::memcpy(&v, intervals + 2 * static_cast<std::ptrdiff_t>(j), sizeof v);
+    return v;
+  };
   const std::size_t done = n / 8 * 8;
   for (std::size_t begin = 0; begin < done; begin += kBlock) {
     const std::size_t len = std::min(kBlock, done - begin);
@@ -422,10 +430,10 @@ __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
     for (std::size_t i = 0; i < len; i += 8) {
       // The (g0, dg) pairs of pixels 0-7, deinterleaved into g0 and dg.
       const std::int32_t* k = k_block + i;
-      const __m128i p01 = _mm_set_epi64x(pairs[k[1]], pairs[k[0]]);
-      const __m128i p23 = _mm_set_epi64x(pairs[k[3]], pairs[k[2]]);
-      const __m128i p45 = _mm_set_epi64x(pairs[k[5]], pairs[k[4]]);
-      const __m128i p67 = _mm_set_epi64x(pairs[k[7]], pairs[k[6]]);
+      const __m128i p01 = _mm_set_epi64x(pair(k[1]), pair(k[0]));
+      const __m128i p23 = _mm_set_epi64x(pair(k[3]), pair(k[2]));
+      const __m128i p45 = _mm_set_epi64x(pair(k[5]), pair(k[4]));
+      const __m128i p67 = _mm_set_epi64x(pair(k[7]), pair(k[6]));
       // Pixels 0, 1, 4, 5 and 2, 3, 6, 7, so that the in-lane shuffles give pixel order.
       const __m256 lo = _mm256_castsi256_ps(_mm256_set_m128i(p45, p01));
       const __m256 hi = _mm256_castsi256_ps(_mm256_set_m128i(p67, p23));

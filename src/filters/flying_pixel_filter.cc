@@ -173,12 +173,13 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
 
 // DecideRow for two rows at once, the mid row m and the row v below it (3-min / 3-max rows u, m,
 // v, x from the row above m to the row below v, their horizontal sums; cm, cv the two rows'
-// weights). Rows m and v are each read once for both output rows: 24 streams for two rows
-// instead of 36. The same float operations per pixel as DecideRow. Returns the pixels of row v
-// that passed the distance conditions (for the next row's form). With an AVX-512 clone: in the
-// AVX2 clone the 28 pointers and the thresholds spill out of 16 vector registers and the loop
-// is no faster than DecideRow twice; with 32 registers the filter takes about 12 % less time on
-// noisy frames (filters_bench, ten interleaved runs, SR-2 and 1 MP; docs/benchmarks.md).
+// weights). Rows m and v's streams are read once for both output rows: 24 input streams for two
+// rows instead of 2 x 17. The same float operations per pixel as DecideRow. Returns the pixels
+// of row v that passed the distance conditions (for the next row's form). Measured with an
+// AVX-512 clone because the AVX2 clone alone was no faster than DecideRow twice; with the
+// x86-64-v4 clone (16 lanes, 32 vector registers) the filter took about 12 % less time on noisy
+// frames (filters_bench, five interleaved pairs: SR-2 median 30.3 against 34.5 us, 1 MP 2.13
+// against 2.41 ms; tofcam bench pairs in docs/benchmarks.md).
 TOFCAM_HOT_LOOP_WIDE std::uint32_t DecideTwoRows(
     int w, const Thresholds& t, const float* __restrict lu, const float* __restrict lm,
     const float* __restrict lv, const float* __restrict lx, const float* __restrict hu,
