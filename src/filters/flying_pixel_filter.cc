@@ -1,6 +1,7 @@
 #include "tofcam/filters/flying_pixel_filter.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -10,6 +11,13 @@
 #include <vector>
 
 #include "filter_internal.h"
+#include "simd.h"
+
+// The AVX-512 row preparation: x86-64 with GCC or clang, wherever the hot loops have clones.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
+#define TOFCAM_FLYING_PIXEL_AVX512 1
+#include <immintrin.h>
+#endif
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -23,15 +31,13 @@ namespace {
 // pixels: depth edges), in the same order of float operations as a full evaluation (horizontal
 // sums per row, then rows up + mid + down), so the result is bit for bit that of the rule.
 //
-// Rows are prepared once into a ring of four padded rows: weight (1 usable, 0 not), amplitude
-// (0 if unusable), and the distance for the minimum (+inf if unusable) and the maximum (-inf).
-// A neutral row (weight 0, amplitude 0, distances that never win) stands above the first and
-// below the last row. Reused per thread so a stable frame size allocates nothing.
+// Rows are prepared once into a ring of four padded rows: weight (1 usable, 0 not) and amplitude
+// (0 if unusable), with their horizontal 3-min / 3-max of the distance (unusable pixels never
+// win). A neutral row (weight 0, amplitude 0, distances that never win) stands above the first
+// and below the last row. Reused per thread so a stable frame size allocates nothing.
 struct Prepared {
   float* w;
   float* a;
-  float* lo;
-  float* hi;
 };
 
 // Ring slots: four rows (the row above, the row or two rows decided, the row below) and a
@@ -41,7 +47,7 @@ constexpr int kNeutral = kRingSlots;
 constexpr int kSlots = kRingSlots + 1;
 
 struct Scratch {
-  std::vector<float> prepared;  // kSlots x 4 streams x (w + 2)
+  std::vector<float> prepared;  // kSlots x 2 streams x (w + 2)
   std::vector<float> minmax;    // kSlots x 2 streams (3-min, 3-max) x w
   std::vector<float> sums;      // kSlots x 3 streams (count, Σa, Σa²) x w, computed on demand
   std::vector<std::uint8_t> candidate;  // one row, padded to a multiple of 8
@@ -51,33 +57,6 @@ struct Scratch {
 // The loops live in functions with __restrict parameters: with many pointers GCC otherwise
 // gives up on the run-time alias checks and does not vectorise. Output pointers point at the
 // padded row's first pixel (index 0 = column 0; index -1 and w are the pad).
-TOFCAM_HOT_LOOP void PrepareRow(int w, const float* __restrict d, const float* __restrict a,
-                                const PixelFlags* __restrict pf, float* __restrict cw,
-                                float* __restrict ca, float* __restrict clo,
-                                float* __restrict chi) {
-  constexpr float kInf = std::numeric_limits<float>::infinity();
-  for (int c = 0; c < w; ++c) {
-    // |x| < inf is false for NaN and ±inf.
-    const bool usable = (static_cast<unsigned>(std::abs(d[c]) < kInf) &
-                         static_cast<unsigned>(std::abs(a[c]) < kInf) &
-                         static_cast<unsigned>((pf[c].bits() & kRejectMask) == 0)) != 0;
-    cw[c] = usable ? 1.0f : 0.0f;
-    ca[c] = usable ? a[c] : 0.0f;
-    clo[c] = usable ? d[c] : kInf;
-    chi[c] = usable ? d[c] : -kInf;
-  }
-}
-
-// Horizontal 3-min and 3-max of one prepared row (clo, chi padded: index -1 and w exist).
-TOFCAM_HOT_LOOP void HorizontalMinMax(int w, const float* __restrict clo,
-                                      const float* __restrict chi, float* __restrict lo,
-                                      float* __restrict hi) {
-  for (int c = 0; c < w; ++c) {
-    lo[c] = std::min(std::min(clo[c - 1], clo[c]), clo[c + 1]);
-    hi[c] = std::max(std::max(chi[c - 1], chi[c]), chi[c + 1]);
-  }
-}
-
 // Horizontal 3-sums of one prepared row: count, Σa, Σa² (cw, ca padded).
 TOFCAM_HOT_LOOP void HorizontalSums(int w, const float* __restrict cw, const float* __restrict ca,
                                     float* __restrict n, float* __restrict sum,
@@ -87,6 +66,202 @@ TOFCAM_HOT_LOOP void HorizontalSums(int w, const float* __restrict cw, const flo
     sum[c] = ca[c - 1] + ca[c] + ca[c + 1];
     sum2[c] = ca[c - 1] * ca[c - 1] + ca[c] * ca[c] + ca[c + 1] * ca[c + 1];
   }
+}
+
+// PrepareRow, HorizontalMinMax and (with `sums` true) HorizontalSums in one pass, eight pixels
+// at a time: a pixel's neighbours come from the blocks before and after it by in-register shifts,
+// so each pixel is prepared once and the prepared row is not read back. Same values bit for bit
+// (the same float operations in the same order; min and max are exact). Writes the padded
+// prepared weights and amplitudes (cw, ca: the sparse path and on-demand sums read them; the
+// last block's lanes beyond w are the neutral 0, so the pad at w keeps its value) and the 3-min /
+// 3-max rows (lo, hi), and with sums the count, Σa and Σa² rows (n, sum, sum2); every output has
+// room for eight floats past w.
+TOFCAM_HOT_LOOP void PrepareRowShifted(int w, bool sums, const float* __restrict d,
+                                       const float* __restrict a, const PixelFlags* __restrict pf,
+                                       float* __restrict cw, float* __restrict ca,
+                                       float* __restrict lo, float* __restrict hi,
+                                       float* __restrict n, float* __restrict sum,
+                                       float* __restrict sum2) {
+  using simd::F8;
+  using simd::I8;
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  constexpr std::int32_t kInfBits = 0x7f800000;
+  struct Block {
+    F8 w, a, lo, hi;
+  };
+  const F8 one = F8{} + 1.0f, inf = F8{} + kInf, ninf = F8{} - kInf;
+  // Block of columns [c0, c0 + 8); lanes at or beyond w are neutral.
+  auto prepare = [&](int c0) __attribute__((always_inline)) {
+    F8 dv, av;
+    I8 fv;
+    if (c0 + 8 <= w) {
+      dv = simd::LoadF8(d + c0);
+      av = simd::LoadF8(a + c0);
+      fv = simd::LoadFlags8(pf + c0);
+    } else {
+      alignas(32) float ds[8] = {}, as[8] = {};
+      alignas(32) std::uint16_t fs[8];
+      for (int l = 0; l < 8; ++l) {
+        const bool in = c0 + l < w;
+        ds[l] = in ? d[c0 + l] : 0.0f;
+        as[l] = in ? a[c0 + l] : 0.0f;
+        fs[l] = in ? pf[c0 + l].bits() : kRejectMask;
+      }
+      dv = simd::LoadF8(ds);
+      av = simd::LoadF8(as);
+      fv = simd::LoadFlags8(fs);
+    }
+    // |x| < inf as integers: false for NaN and ±inf.
+    const I8 usable = (simd::AbsBits(dv) < kInfBits) & (simd::AbsBits(av) < kInfBits) &
+                      ((fv & static_cast<std::int32_t>(kRejectMask)) == 0);
+    return Block{simd::Select(usable, one), simd::Select(usable, av), usable != 0 ? dv : inf,
+                 usable != 0 ? dv : ninf};
+  };
+  const Block neutral{F8{}, F8{}, inf, ninf};
+  // Lane i of the block before / after column c0 + i, and std::min / std::max in the scalar
+  // loops' operand order (the values are never NaN). Macros rather than lambdas: clang refuses
+  // lambdas taking 32-byte vectors in a function with an AVX2 clone (their ABI differs).
+#define TOFCAM_LEFT(before, at) __builtin_shufflevector(before, at, 7, 8, 9, 10, 11, 12, 13, 14)
+#define TOFCAM_RIGHT(at, after) __builtin_shufflevector(at, after, 1, 2, 3, 4, 5, 6, 7, 8)
+  Block prev = neutral, cur = prepare(0);
+  for (int c0 = 0; c0 < w; c0 += 8) {
+    const Block next = c0 + 8 < w ? prepare(c0 + 8) : neutral;
+    const F8 lo_l = TOFCAM_LEFT(prev.lo, cur.lo), lo_r = TOFCAM_RIGHT(cur.lo, next.lo);
+    const F8 hi_l = TOFCAM_LEFT(prev.hi, cur.hi), hi_r = TOFCAM_RIGHT(cur.hi, next.hi);
+    const F8 lo_lc = cur.lo < lo_l ? cur.lo : lo_l;
+    const F8 hi_lc = hi_l < cur.hi ? cur.hi : hi_l;
+    const F8 lo3 = lo_r < lo_lc ? lo_r : lo_lc;
+    const F8 hi3 = hi_lc < hi_r ? hi_r : hi_lc;
+    std::memcpy(cw + c0, &cur.w, sizeof cur.w);
+    std::memcpy(ca + c0, &cur.a, sizeof cur.a);
+    std::memcpy(lo + c0, &lo3, sizeof lo3);
+    std::memcpy(hi + c0, &hi3, sizeof hi3);
+    if (sums) {
+      const F8 al = TOFCAM_LEFT(prev.a, cur.a), ar = TOFCAM_RIGHT(cur.a, next.a);
+      const F8 nn = (TOFCAM_LEFT(prev.w, cur.w) + cur.w) + TOFCAM_RIGHT(cur.w, next.w);
+      const F8 ss = (al + cur.a) + ar;
+      const F8 qq = (al * al + cur.a * cur.a) + ar * ar;
+      std::memcpy(n + c0, &nn, sizeof nn);
+      std::memcpy(sum + c0, &ss, sizeof ss);
+      std::memcpy(sum2 + c0, &qq, sizeof qq);
+    }
+    prev = cur;
+    cur = next;
+  }
+#undef TOFCAM_LEFT
+#undef TOFCAM_RIGHT
+}
+
+#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+// PrepareRowShifted for AVX-512 CPUs, sixteen pixels at a time, written with intrinsics: GCC 12
+// compiles 16-lane generic vectors of a target_clones function for the baseline ISA first and
+// turns their compares into scalar code. The same values bit for bit as PrepareRowShifted:
+// std::min(x, y) = (y < x ? y : x) = vminps(y, x) and std::max(x, y) = vmaxps(y, x) (also for
+// zeros of both signs), and separate multiplies and adds in the same order (the file is built
+// with -ffp-contract=off). The last block's loads are masked (no read past w) and its lanes
+// beyond w are neutral.
+#define TOFCAM_AVX512_TARGET __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq")))
+#define TOFCAM_AVX512_INLINE \
+  __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq"), always_inline)) inline
+// GCC 12's AVX-512 headers start some intrinsics from _mm512_undefined_*(), which
+// -Wmaybe-uninitialized reports (GCC bug 105593); nothing here reads an undefined value.
+#if !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
+struct Block16 {
+  __m512 w, a, lo, hi;
+};
+
+TOFCAM_AVX512_INLINE Block16 Prepare16(int w, int c0, const float* d, const float* a,
+                                       const PixelFlags* pf) {
+  const int left_in_row = w - c0;
+  const __mmask16 in =
+      left_in_row >= 16 ? __mmask16{0xFFFF} : static_cast<__mmask16>((1u << left_in_row) - 1u);
+  const __m512 dv = _mm512_maskz_loadu_ps(in, d + c0);
+  const __m512 av = _mm512_maskz_loadu_ps(in, a + c0);
+  const __m256i fv = _mm256_maskz_loadu_epi16(in, pf + c0);
+  const __m512 inf = _mm512_set1_ps(std::numeric_limits<float>::infinity());
+  // |x| < inf: false for NaN and ±inf; no reject flag.
+  const __mmask16 usable =
+      in & _mm512_cmp_ps_mask(_mm512_abs_ps(dv), inf, _CMP_LT_OQ) &
+      _mm512_cmp_ps_mask(_mm512_abs_ps(av), inf, _CMP_LT_OQ) &
+      _mm256_testn_epi16_mask(fv, _mm256_set1_epi16(static_cast<short>(kRejectMask)));
+  return Block16{
+      _mm512_maskz_mov_ps(usable, _mm512_set1_ps(1.0f)), _mm512_maskz_mov_ps(usable, av),
+      _mm512_mask_blend_ps(usable, inf, dv),
+      _mm512_mask_blend_ps(usable, _mm512_set1_ps(-std::numeric_limits<float>::infinity()), dv)};
+}
+
+// Lane i of the block before / after column c0 + i.
+TOFCAM_AVX512_INLINE __m512 Left16(__m512 before, __m512 at) {
+  return _mm512_castsi512_ps(
+      _mm512_alignr_epi32(_mm512_castps_si512(at), _mm512_castps_si512(before), 15));
+}
+TOFCAM_AVX512_INLINE __m512 Right16(__m512 at, __m512 after) {
+  return _mm512_castsi512_ps(
+      _mm512_alignr_epi32(_mm512_castps_si512(after), _mm512_castps_si512(at), 1));
+}
+
+TOFCAM_AVX512_TARGET void PrepareRowShifted16(int w, bool sums, const float* __restrict d,
+                                              const float* __restrict a,
+                                              const PixelFlags* __restrict pf, float* __restrict cw,
+                                              float* __restrict ca, float* __restrict lo,
+                                              float* __restrict hi, float* __restrict n,
+                                              float* __restrict sum, float* __restrict sum2) {
+  const Block16 neutral{_mm512_setzero_ps(), _mm512_setzero_ps(),
+                        _mm512_set1_ps(std::numeric_limits<float>::infinity()),
+                        _mm512_set1_ps(-std::numeric_limits<float>::infinity())};
+  Block16 prev = neutral, cur = Prepare16(w, 0, d, a, pf);
+  for (int c0 = 0; c0 < w; c0 += 16) {
+    const Block16 next = c0 + 16 < w ? Prepare16(w, c0 + 16, d, a, pf) : neutral;
+    _mm512_storeu_ps(cw + c0, cur.w);
+    _mm512_storeu_ps(ca + c0, cur.a);
+    _mm512_storeu_ps(lo + c0, _mm512_min_ps(Right16(cur.lo, next.lo),
+                                            _mm512_min_ps(cur.lo, Left16(prev.lo, cur.lo))));
+    _mm512_storeu_ps(hi + c0, _mm512_max_ps(Right16(cur.hi, next.hi),
+                                            _mm512_max_ps(cur.hi, Left16(prev.hi, cur.hi))));
+    if (sums) {
+      const __m512 al = Left16(prev.a, cur.a), ar = Right16(cur.a, next.a);
+      _mm512_storeu_ps(n + c0, _mm512_add_ps(_mm512_add_ps(Left16(prev.w, cur.w), cur.w),
+                                             Right16(cur.w, next.w)));
+      _mm512_storeu_ps(sum + c0, _mm512_add_ps(_mm512_add_ps(al, cur.a), ar));
+      _mm512_storeu_ps(sum2 + c0, _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(al, al),
+                                                              _mm512_mul_ps(cur.a, cur.a)),
+                                                _mm512_mul_ps(ar, ar)));
+    }
+    prev = cur;
+    cur = next;
+  }
+}
+
+#if !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
+bool CpuHasAvx512() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+         __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq");
+}
+#endif
+
+std::atomic<bool> portable_only{false};
+
+// PrepareRowShifted16 where the CPU has AVX-512 (unless a test asked for the portable form),
+// else PrepareRowShifted.
+void PrepareRowAnyCpu(int w, bool sums, const float* d, const float* a, const PixelFlags* pf,
+                      float* cw, float* ca, float* lo, float* hi, float* n, float* sum,
+                      float* sum2) {
+#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+  static const bool avx512 = CpuHasAvx512();
+  if (avx512 && !portable_only.load(std::memory_order_relaxed)) {
+    PrepareRowShifted16(w, sums, d, a, pf, cw, ca, lo, hi, n, sum, sum2);
+    return;
+  }
+#endif
+  PrepareRowShifted(w, sums, d, a, pf, cw, ca, lo, hi, n, sum, sum2);
 }
 
 struct Thresholds {
@@ -246,36 +421,32 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   auto skewed = [](std::size_t n) { return (n + 15) / 16 * 16 + 16; };
   const std::size_t pw = skewed(sw + 2), mw = skewed(sw);
   thread_local Scratch s;
-  s.prepared.resize(kSlots * 4 * pw);
+  s.prepared.resize(kSlots * 2 * pw);
   s.minmax.resize(kSlots * 2 * mw);
-  s.sums.assign(kSlots * 3 * mw, 0.0f);  // the neutral slot's sums stay 0
+  s.sums.resize(kSlots * 3 * mw);
   s.candidate.assign((sw + 7) / 8 * 8, 0);
   // Without an echo image the sparse rows echo into a scratch row nobody reads (the dense rows
   // skip the echo).
   s.echo_sink.resize(sw);
   // Slot k in 0..kNeutral; pointers at column 0 of the padded rows.
   auto prepared = [&](int k) {
-    float* base = s.prepared.data() + static_cast<std::size_t>(k) * 4 * pw + 1;
-    return Prepared{base, base + pw, base + 2 * pw, base + 3 * pw};
+    float* base = s.prepared.data() + static_cast<std::size_t>(k) * 2 * pw + 1;
+    return Prepared{base, base + pw};
   };
   auto lo_of = [&](int k) { return s.minmax.data() + static_cast<std::size_t>(k) * 2 * mw; };
   auto hi_of = [&](int k) { return lo_of(k) + mw; };
-  for (int k = 0; k < kSlots; ++k) {
+  for (int k = 0; k < kRingSlots; ++k) {
+    // Pads: weight 0, amplitude 0 (PrepareRowShifted keeps them).
     const Prepared p = prepared(k);
-    // Pads (and the whole neutral row): weight 0, amplitude 0, distances that never win.
-    const int first = k == kNeutral ? -1 : w, last = w;
-    for (int c = -1; c <= last; ++c) {
-      if (k != kNeutral && c >= 0 && c < first) continue;
-      p.w[c] = 0.0f;
-      p.a[c] = 0.0f;
-      p.lo[c] = kInf;
-      p.hi[c] = -kInf;
-    }
+    p.w[-1] = p.a[-1] = p.w[w] = p.a[w] = 0.0f;
   }
+  // The neutral row: weight, amplitude and sums 0, distances that never win.
+  std::fill_n(prepared(kNeutral).w - 1, 2 * pw, 0.0f);
   std::fill(lo_of(kNeutral), lo_of(kNeutral) + sw, kInf);
   std::fill(hi_of(kNeutral), hi_of(kNeutral) + sw, -kInf);
-  const PixelFlags* prior_px = PriorOrZeros(prior, frame.radial_distance_m.size());
   auto sums_of = [&](int k) { return s.sums.data() + static_cast<std::size_t>(k) * 3 * mw; };
+  std::fill_n(sums_of(kNeutral), 3 * mw, 0.0f);
+  const PixelFlags* prior_px = PriorOrZeros(prior, frame.radial_distance_m.size());
   int sums_row[kRingSlots] = {-1, -1, -1, -1};  // the row whose sums slot k holds
   // Slot k's sums for row r (k = kNeutral: the neutral row), computed once per row when first
   // needed.
@@ -290,11 +461,16 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   };
 
   auto slot = [h](int r) { return r >= 0 && r < h ? r % kRingSlots : kNeutral; };
-  auto prepare_row = [&](int r) {
-    const Prepared p = prepared(slot(r));
-    PrepareRow(w, frame.radial_distance_m.Row(r).data(), frame.amplitude.Row(r).data(),
-               prior_px + static_cast<std::size_t>(r) * sw, p.w, p.a, p.lo, p.hi);
-    HorizontalMinMax(w, p.lo, p.hi, lo_of(slot(r)), hi_of(slot(r)));
+  // Row r into its slot; with_sums: its horizontal sums too (when the rows it will be decided
+  // with are expected to have many candidates).
+  auto prepare_row = [&](int r, bool with_sums) {
+    const int k = slot(r);
+    const Prepared p = prepared(k);
+    float* nk = sums_of(k);
+    PrepareRowAnyCpu(w, with_sums, frame.radial_distance_m.Row(r).data(),
+                     frame.amplitude.Row(r).data(), prior_px + static_cast<std::size_t>(r) * sw,
+                     p.w, p.a, lo_of(k), hi_of(k), nk, nk + mw, nk + 2 * mw);
+    sums_row[k] = with_sums ? r : -1;
   };
 
   const Thresholds t{
@@ -303,10 +479,10 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       static_cast<float>(o.min_max_delta_m),        static_cast<float>(o.min_avg_delta_m)};
   const std::uint16_t bit = static_cast<std::uint16_t>(Flag::kFlyingPixel);
   std::uint8_t* candidate = s.candidate.data();
-  prepare_row(0);
+  prepare_row(0, false);
   bool dense = false;  // the previous row had many candidates
   for (int r = 0; r < h; ++r) {
-    if (r + 1 < h) prepare_row(r + 1);
+    if (r + 1 < h) prepare_row(r + 1, dense);
     const int ku = slot(r - 1), km = slot(r), kv = slot(r + 1);
     const Prepared u = prepared(ku), m = prepared(km), v = prepared(kv);
     const float* d = frame.radial_distance_m.Row(r).data();
@@ -325,7 +501,7 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
     };
     if (dense && r + 1 < h) {
       // Rows r and r + 1 together; row r + 2 (or the neutral row) is the lower neighbour.
-      if (r + 2 < h) prepare_row(r + 2);
+      if (r + 2 < h) prepare_row(r + 2, true);
       const int kx = slot(r + 2);
       const float* nu = sums(ku, r - 1);
       const float* nm = sums(km, r);
@@ -366,6 +542,18 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       }
     }
   }
+}
+
+void UsePortableFlyingPixelForTesting(bool portable) {
+  portable_only.store(portable, std::memory_order_relaxed);
+}
+
+bool FlyingPixelAvx512Available() {
+#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+  return CpuHasAvx512();
+#else
+  return false;
+#endif
 }
 
 }  // namespace filters_internal

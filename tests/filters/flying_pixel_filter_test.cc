@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "filter_internal.h"  // internal: the portable / AVX-512 switch (src/filters)
 #include "test_scene.h"
 #include "tofcam/core/error.h"
 
@@ -248,6 +249,51 @@ TEST(FlyingPixelFilterTest, MatchesTheRuleWhenEveryRowHasManyCandidatesAtEvenAnd
     EXPECT_GT(flagged_first, 0);
     EXPECT_GT(flagged_last, 0);
   }
+}
+
+TEST(FlyingPixelFilterTest, PortableAndAvx512RowPreparationGiveTheSameFlags) {
+  // The rows are prepared by an AVX-512 loop (16 pixels a step, masked loads at the row's end)
+  // where the CPU has it and by a portable one (8 a step) elsewhere. Every width from 1 to 70
+  // (every remainder of both block sizes) and the SR-2's 160, noisy rows (decided whole) and
+  // flat ones (candidates one by one), NaN, infinite and rejected pixels: the portable form
+  // must equal the rule, and the two forms must give the same flags bit for bit.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::normal_distribution<float> noise(0.0f, 1.0f);
+  const bool avx512 = filters_internal::FlyingPixelAvx512Available();
+  int flagged = 0;
+  std::vector<int> widths;
+  for (int w = 1; w <= 70; ++w) widths.push_back(w);
+  widths.push_back(160);
+  for (const int w : widths) {
+    SCOPED_TRACE(w);
+    const int h = 3 + w % 5;
+    MetricFrame f = BlankFrame(w, h);
+    for (int r = 0; r < h; ++r) {
+      const bool noisy = r % 3 != 1;
+      for (int c = 0; c < w; ++c) {
+        const float d = noisy ? 1.0f + 1.5f * u(rng) + 0.1f * noise(rng)
+                              : (c < w / 2 ? 1.5f : 2.5f) + 0.002f * noise(rng);
+        f.radial_distance_m(r, c) = d;
+        f.amplitude(r, c) = 4000.0f / (d * d) * (1.0f + 0.2f * noise(rng));
+        const float x = u(rng);
+        if (x < 0.02f) f.radial_distance_m(r, c) = std::numeric_limits<float>::quiet_NaN();
+        if (x > 0.02f && x < 0.03f) f.amplitude(r, c) = -std::numeric_limits<float>::infinity();
+        if (x > 0.03f && x < 0.07f) f.flags(r, c) = Flag::kHighDeltaL;
+      }
+    }
+    filters_internal::UsePortableFlyingPixelForTesting(true);
+    const Image<PixelFlags> portable = FlyingPixelFilter(f, FlyingPixelOptions{});
+    ExpectMatchesRule(f, FlyingPixelOptions{});
+    filters_internal::UsePortableFlyingPixelForTesting(false);
+    const Image<PixelFlags> fast = FlyingPixelFilter(f, FlyingPixelOptions{});
+    for (std::size_t i = 0; i < fast.size(); ++i) {
+      ASSERT_EQ(fast[i].bits(), portable[i].bits()) << i;
+      flagged += fast[i].Has(Flag::kFlyingPixel);
+    }
+  }
+  EXPECT_GT(flagged, 100);  // the comparison is not between two empty images
+  if (!avx512) GTEST_SKIP() << "no AVX-512 on this CPU: only the portable form was compared";
 }
 
 TEST(FlyingPixelFilterTest, ErrorsAreReported) {
