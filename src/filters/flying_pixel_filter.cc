@@ -68,14 +68,17 @@ TOFCAM_HOT_LOOP void HorizontalSums(int w, const float* __restrict cw, const flo
   }
 }
 
-// PrepareRow, HorizontalMinMax and (with `sums` true) HorizontalSums in one pass, eight pixels
-// at a time: a pixel's neighbours come from the blocks before and after it by in-register shifts,
-// so each pixel is prepared once and the prepared row is not read back. Same values bit for bit
-// (the same float operations in the same order; min and max are exact). Writes the padded
-// prepared weights and amplitudes (cw, ca: the sparse path and on-demand sums read them; the
-// last block's lanes beyond w are the neutral 0, so the pad at w keeps its value) and the 3-min /
-// 3-max rows (lo, hi), and with sums the count, Σa and Σa² rows (n, sum, sum2); every output has
-// room for eight floats past w.
+// Prepares one row in one pass, eight pixels at a time: per pixel the weight (1 usable: finite
+// distance and amplitude, no reject flag; else 0), the amplitude (0 if unusable) and the distance
+// for the minimum (+inf if unusable) and the maximum (-inf); then the horizontal 3-min / 3-max and,
+// with `sums`, the horizontal 3-sums of HorizontalSums. A pixel's neighbours come from the blocks
+// before and after it by in-register shifts, so each pixel is prepared once and nothing is read
+// back; the sums are the same float operations in the same order as HorizontalSums (min and max
+// are exact), so the values are the same bit for bit. Writes the padded weights and amplitudes
+// (cw, ca: the sparse path and on-demand sums read them; the last block's lanes beyond w are the
+// neutral 0, so the pad at w keeps its value), the 3-min / 3-max rows (lo, hi) and with sums the
+// count, Σa and Σa² rows (n, sum, sum2); every output has room for 16 floats past w. Measured
+// against the three separate row loops it replaced (filters_bench, docs/benchmarks.md).
 TOFCAM_HOT_LOOP void PrepareRowShifted(int w, bool sums, const float* __restrict d,
                                        const float* __restrict a, const PixelFlags* __restrict pf,
                                        float* __restrict cw, float* __restrict ca,
