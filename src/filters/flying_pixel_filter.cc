@@ -77,14 +77,16 @@ TOFCAM_HOT_LOOP void HorizontalSums(int w, const float* __restrict cw, const flo
 // are exact), so the values are the same bit for bit. Writes the padded weights and amplitudes
 // (cw, ca: the sparse path and on-demand sums read them; the last block's lanes beyond w are the
 // neutral 0, so the pad at w keeps its value), the 3-min / 3-max rows (lo, hi) and with sums the
-// count, Σa and Σa² rows (n, sum, sum2); every output has room for 16 floats past w. Measured
-// against the three separate row loops it replaced (filters_bench, docs/benchmarks.md).
+// count, Σa and Σa² rows (n, sum, sum2); every output has room for 16 floats past w. With
+// next_d not null it prefetches the next row's inputs (next_d, next_a, next_pf) as it goes.
+// Measured against the three separate row loops it replaced (filters_bench, docs/benchmarks.md).
 TOFCAM_HOT_LOOP void PrepareRowShifted(int w, bool sums, const float* __restrict d,
                                        const float* __restrict a, const PixelFlags* __restrict pf,
-                                       float* __restrict cw, float* __restrict ca,
-                                       float* __restrict lo, float* __restrict hi,
-                                       float* __restrict n, float* __restrict sum,
-                                       float* __restrict sum2) {
+                                       const float* next_d, const float* next_a,
+                                       const PixelFlags* next_pf, float* __restrict cw,
+                                       float* __restrict ca, float* __restrict lo,
+                                       float* __restrict hi, float* __restrict n,
+                                       float* __restrict sum, float* __restrict sum2) {
   using simd::F8;
   using simd::I8;
   constexpr float kInf = std::numeric_limits<float>::infinity();
@@ -128,6 +130,11 @@ TOFCAM_HOT_LOOP void PrepareRowShifted(int w, bool sums, const float* __restrict
 #define TOFCAM_RIGHT(at, after) __builtin_shufflevector(at, after, 1, 2, 3, 4, 5, 6, 7, 8)
   Block prev = neutral, cur = prepare(0);
   for (int c0 = 0; c0 < w; c0 += 8) {
+    if (next_d != nullptr && (c0 & 15) == 0) {  // one 64-byte line per 16 pixels (32 of flags)
+      __builtin_prefetch(next_d + c0);
+      __builtin_prefetch(next_a + c0);
+      if ((c0 & 31) == 0) __builtin_prefetch(next_pf + c0);
+    }
     const Block next = c0 + 8 < w ? prepare(c0 + 8) : neutral;
     const F8 lo_l = TOFCAM_LEFT(prev.lo, cur.lo), lo_r = TOFCAM_RIGHT(cur.lo, next.lo);
     const F8 hi_l = TOFCAM_LEFT(prev.hi, cur.hi), hi_r = TOFCAM_RIGHT(cur.hi, next.hi);
@@ -207,17 +214,21 @@ TOFCAM_AVX512_INLINE __m512 Right16(__m512 at, __m512 after) {
       _mm512_alignr_epi32(_mm512_castps_si512(after), _mm512_castps_si512(at), 1));
 }
 
-TOFCAM_AVX512_TARGET void PrepareRowShifted16(int w, bool sums, const float* __restrict d,
-                                              const float* __restrict a,
-                                              const PixelFlags* __restrict pf, float* __restrict cw,
-                                              float* __restrict ca, float* __restrict lo,
-                                              float* __restrict hi, float* __restrict n,
-                                              float* __restrict sum, float* __restrict sum2) {
+TOFCAM_AVX512_TARGET void PrepareRowShifted16(
+    int w, bool sums, const float* __restrict d, const float* __restrict a,
+    const PixelFlags* __restrict pf, const float* next_d, const float* next_a,
+    const PixelFlags* next_pf, float* __restrict cw, float* __restrict ca, float* __restrict lo,
+    float* __restrict hi, float* __restrict n, float* __restrict sum, float* __restrict sum2) {
   const Block16 neutral{_mm512_setzero_ps(), _mm512_setzero_ps(),
                         _mm512_set1_ps(std::numeric_limits<float>::infinity()),
                         _mm512_set1_ps(-std::numeric_limits<float>::infinity())};
   Block16 prev = neutral, cur = Prepare16(w, 0, d, a, pf);
   for (int c0 = 0; c0 < w; c0 += 16) {
+    if (next_d != nullptr) {
+      _mm_prefetch(reinterpret_cast<const char*>(next_d + c0), _MM_HINT_T0);
+      _mm_prefetch(reinterpret_cast<const char*>(next_a + c0), _MM_HINT_T0);
+      if ((c0 & 31) == 0) _mm_prefetch(reinterpret_cast<const char*>(next_pf + c0), _MM_HINT_T0);
+    }
     const Block16 next = c0 + 16 < w ? Prepare16(w, c0 + 16, d, a, pf) : neutral;
     _mm512_storeu_ps(cw + c0, cur.w);
     _mm512_storeu_ps(ca + c0, cur.a);
@@ -255,16 +266,17 @@ std::atomic<bool> portable_only{false};
 // PrepareRowShifted16 where the CPU has AVX-512 (unless a test asked for the portable form),
 // else PrepareRowShifted.
 void PrepareRowAnyCpu(int w, bool sums, const float* d, const float* a, const PixelFlags* pf,
+                      const float* next_d, const float* next_a, const PixelFlags* next_pf,
                       float* cw, float* ca, float* lo, float* hi, float* n, float* sum,
                       float* sum2) {
 #if defined(TOFCAM_FLYING_PIXEL_AVX512)
   static const bool avx512 = CpuHasAvx512();
   if (avx512 && !portable_only.load(std::memory_order_relaxed)) {
-    PrepareRowShifted16(w, sums, d, a, pf, cw, ca, lo, hi, n, sum, sum2);
+    PrepareRowShifted16(w, sums, d, a, pf, next_d, next_a, next_pf, cw, ca, lo, hi, n, sum, sum2);
     return;
   }
 #endif
-  PrepareRowShifted(w, sums, d, a, pf, cw, ca, lo, hi, n, sum, sum2);
+  PrepareRowShifted(w, sums, d, a, pf, next_d, next_a, next_pf, cw, ca, lo, hi, n, sum, sum2);
 }
 
 struct Thresholds {
@@ -464,15 +476,25 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   };
 
   auto slot = [h](int r) { return r >= 0 && r < h ? r % kRingSlots : kNeutral; };
+  // Frames whose inputs (10 bytes a pixel) exceed half of a typical 1 MiB L2 come from L3 or DRAM:
+  // there each row is a new page, where the hardware prefetcher starts again, and the loads of a
+  // row's first blocks waited on memory (40 % of the row preparation at 1 MP in perf). The row
+  // preparation then prefetches the next row. Smaller frames stay in L2 between calls, where the
+  // prefetches only cost (filters_bench: SR-2 about 2 % slower with them, VGA 12 % faster).
+  const bool prefetch = static_cast<std::size_t>(w) * h * 10 > (std::size_t{1} << 19);
   // Row r into its slot; with_sums: its horizontal sums too (when the rows it will be decided
   // with are expected to have many candidates).
   auto prepare_row = [&](int r, bool with_sums) {
     const int k = slot(r);
     const Prepared p = prepared(k);
     float* nk = sums_of(k);
+    const bool no_prefetch = r + 1 >= h || !prefetch;
     PrepareRowAnyCpu(w, with_sums, frame.radial_distance_m.Row(r).data(),
                      frame.amplitude.Row(r).data(), prior_px + static_cast<std::size_t>(r) * sw,
-                     p.w, p.a, lo_of(k), hi_of(k), nk, nk + mw, nk + 2 * mw);
+                     no_prefetch ? nullptr : frame.radial_distance_m.Row(r + 1).data(),
+                     no_prefetch ? nullptr : frame.amplitude.Row(r + 1).data(),
+                     no_prefetch ? nullptr : prior_px + static_cast<std::size_t>(r + 1) * sw, p.w,
+                     p.a, lo_of(k), hi_of(k), nk, nk + mw, nk + 2 * mw);
     sums_row[k] = with_sums ? r : -1;
   };
 
