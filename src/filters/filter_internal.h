@@ -28,8 +28,8 @@ void CheckRays(const MetricFrame& frame, const RayTable& rays, const char* filte
 // no null checks (valid until the next call on this thread).
 const PixelFlags* PriorOrZeros(const Image<PixelFlags>& prior, std::size_t n);
 
-// Tests only: with true, the flying-pixel filter prepares its rows with the portable loop even on
-// an AVX-512 CPU, so both forms can be compared with the rule on one machine.
+// Tests only: with true, the flying-pixel filter runs its portable loops (row preparation, two-row
+// decision) even on an AVX-512 CPU, so both forms can be compared with the rule on one machine.
 void UsePortableFlyingPixelForTesting(bool portable);
 // Whether the flying-pixel filter has an AVX-512 row preparation and this CPU runs it.
 bool FlyingPixelAvx512Available();

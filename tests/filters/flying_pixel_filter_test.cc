@@ -251,9 +251,10 @@ TEST(FlyingPixelFilterTest, MatchesTheRuleWhenEveryRowHasManyCandidatesAtEvenAnd
   }
 }
 
-TEST(FlyingPixelFilterTest, PortableAndAvx512RowPreparationGiveTheSameFlags) {
-  // The rows are prepared by an AVX-512 loop (16 pixels a step, masked loads at the row's end)
-  // where the CPU has it and by a portable one (8 a step) elsewhere. Every width from 1 to 70
+TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
+  // Rows are prepared, and rows with many candidates decided two at a time, by AVX-512 loops (16
+  // pixels a step, masked loads and stores at the row's end) where the CPU has them and by
+  // portable ones (8 pixels a step; GCC's clones) elsewhere. Every width from 1 to 70
   // (every remainder of both block sizes) and the SR-2's 160, noisy rows (decided whole) and
   // flat ones (candidates one by one), NaN, infinite and rejected pixels: the portable form
   // must equal the rule, and the two forms must give the same flags bit for bit.
