@@ -13,7 +13,8 @@
 #include "filter_internal.h"
 #include "simd.h"
 
-// The AVX-512 row preparation: x86-64 with GCC or clang, wherever the hot loops have clones.
+// The AVX-512 forms (row preparation, two-row decision): x86-64 with GCC or clang, except in
+// AddressSanitizer builds (TOFCAM_NO_CLONES, hot_loop.h), which keep to the portable loops.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
 #define TOFCAM_FLYING_PIXEL_AVX512 1
 #include <immintrin.h>
@@ -49,7 +50,7 @@ constexpr int kSlots = kRingSlots + 1;
 struct Scratch {
   std::vector<float> prepared;  // kSlots x 2 streams x (w + 2)
   std::vector<float> minmax;    // kSlots x 2 streams (3-min, 3-max) x w
-  std::vector<float> sums;      // kSlots x 3 streams (count, Σa, Σa²) x w, computed on demand
+  std::vector<float> sums;      // kSlots x 3 streams (count, Σa, Σa²) x w, when a row needs them
   std::vector<std::uint8_t> candidate;  // one row, padded to a multiple of 8
   std::vector<PixelFlags> echo_sink;    // one row
 };
@@ -365,11 +366,11 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
 // v, x from the row above m to the row below v, their horizontal sums; cm, cv the two rows'
 // weights). Rows m and v's streams are read once for both output rows: 24 input streams for two
 // rows instead of 2 x 17. The same float operations per pixel as DecideRow. Returns the pixels
-// of row v that passed the distance conditions (for the next row's form). Measured with an
-// AVX-512 clone because the AVX2 clone alone was no faster than DecideRow twice; with the
-// x86-64-v4 clone (16 lanes, 32 vector registers) the filter took about 12 % less time on noisy
-// frames (filters_bench, five interleaved pairs: SR-2 median 30.3 against 34.5 us, 1 MP 2.13
-// against 2.41 ms; tofcam bench pairs in docs/benchmarks.md).
+// of row v that passed the distance conditions (for the next row's form). The portable form:
+// AVX-512 CPUs run DecideTwoRows16 (below) instead. Its x86-64-v4 clone was measured first (the
+// AVX2 clone alone was no faster than DecideRow twice; the v4 clone took about 12 % less time on
+// noisy frames, filters_bench SR-2 30.3 against 34.5 us) and is kept for AVX-512 CPUs under the
+// test switch and where the intrinsics are compiled out.
 TOFCAM_HOT_LOOP_WIDE std::uint32_t DecideTwoRows(
     int w, const Thresholds& t, const float* __restrict lu, const float* __restrict lm,
     const float* __restrict lv, const float* __restrict lx, const float* __restrict hu,

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "filter_internal.h"  // internal: the portable / AVX-512 switch (src/filters)
@@ -254,21 +255,23 @@ TEST(FlyingPixelFilterTest, MatchesTheRuleWhenEveryRowHasManyCandidatesAtEvenAnd
 TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
   // Rows are prepared, and rows with many candidates decided two at a time, by AVX-512 loops (16
   // pixels a step, masked loads and stores at the row's end) where the CPU has them and by
-  // portable ones (8 pixels a step; GCC's clones) elsewhere. Every width from 1 to 70
-  // (every remainder of both block sizes) and the SR-2's 160, noisy rows (decided whole) and
-  // flat ones (candidates one by one), NaN, infinite and rejected pixels: the portable form
-  // must equal the rule, and the two forms must give the same flags bit for bit.
+  // portable ones (8 pixels a step; GCC's clones) elsewhere. Every width from 1 to 70 (every
+  // remainder of both block sizes), the SR-2's 160 and one frame large enough (263 x 211) that
+  // the row preparation prefetches the next row; two noisy rows, then a flat one (its candidates,
+  // if any, tested one by one when the row is decided alone), NaN, infinite and rejected pixels.
+  // In both forms the flags must equal the rule, and the bits echoed into a second image (what
+  // FilterSet's later filters see) must equal the flags; the two forms must agree bit for bit.
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::normal_distribution<float> noise(0.0f, 1.0f);
   const bool avx512 = filters_internal::FlyingPixelAvx512Available();
   int flagged = 0;
-  std::vector<int> widths;
-  for (int w = 1; w <= 70; ++w) widths.push_back(w);
-  widths.push_back(160);
-  for (const int w : widths) {
-    SCOPED_TRACE(w);
-    const int h = 3 + w % 5;
+  std::vector<std::pair<int, int>> sizes;
+  for (int w = 1; w <= 70; ++w) sizes.emplace_back(w, 3 + w % 5);
+  sizes.emplace_back(160, 7);
+  sizes.emplace_back(263, 211);
+  for (const auto& [w, h] : sizes) {
+    SCOPED_TRACE(testing::Message() << w << " x " << h);
     MetricFrame f = BlankFrame(w, h);
     for (int r = 0; r < h; ++r) {
       const bool noisy = r % 3 != 1;
@@ -283,11 +286,21 @@ TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
         if (x > 0.03f && x < 0.07f) f.flags(r, c) = Flag::kHighDeltaL;
       }
     }
-    filters_internal::UsePortableFlyingPixelForTesting(true);
-    const Image<PixelFlags> portable = FlyingPixelFilter(f, FlyingPixelOptions{});
-    ExpectMatchesRule(f, FlyingPixelOptions{});
-    filters_internal::UsePortableFlyingPixelForTesting(false);
-    const Image<PixelFlags> fast = FlyingPixelFilter(f, FlyingPixelOptions{});
+    // The filter in one form: its flags, after checking them against the rule and the echo.
+    auto run = [&](bool portable) {
+      filters_internal::UsePortableFlyingPixelForTesting(portable);
+      ExpectMatchesRule(f, FlyingPixelOptions{});
+      Image<PixelFlags> out(w, h), echo(w, h);
+      filters_internal::FlyingPixelInto(f, f.flags, FlyingPixelOptions{}, out, &echo);
+      for (std::size_t i = 0; i < out.size(); ++i) {
+        EXPECT_EQ(echo[i].bits(), out[i].bits() & static_cast<std::uint16_t>(Flag::kFlyingPixel))
+            << i;
+      }
+      filters_internal::UsePortableFlyingPixelForTesting(false);
+      return out;
+    };
+    const Image<PixelFlags> portable = run(true);
+    const Image<PixelFlags> fast = run(false);
     for (std::size_t i = 0; i < fast.size(); ++i) {
       ASSERT_EQ(fast[i].bits(), portable[i].bits()) << i;
       flagged += fast[i].Has(Flag::kFlyingPixel);
