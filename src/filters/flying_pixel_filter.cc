@@ -58,6 +58,7 @@ struct Scratch {
 // The loops live in functions with __restrict parameters: with many pointers GCC otherwise
 // gives up on the run-time alias checks and does not vectorise. Output pointers point at the
 // padded row's first pixel (index 0 = column 0; index -1 and w are the pad).
+
 // Horizontal 3-sums of one prepared row: count, Σa, Σa² (cw, ca padded).
 TOFCAM_HOT_LOOP void HorizontalSums(int w, const float* __restrict cw, const float* __restrict ca,
                                     float* __restrict n, float* __restrict sum,
@@ -264,6 +265,14 @@ bool CpuHasAvx512() {
 
 std::atomic<bool> portable_only{false};
 
+#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+// Whether this CPU runs the AVX-512 forms (decided once) and no test asked for the portable ones.
+bool UseAvx512Forms() {
+  static const bool avx512 = CpuHasAvx512();
+  return avx512 && !portable_only.load(std::memory_order_relaxed);
+}
+#endif
+
 // PrepareRowShifted16 where the CPU has AVX-512 (unless a test asked for the portable form),
 // else PrepareRowShifted.
 void PrepareRowAnyCpu(int w, bool sums, const float* d, const float* a, const PixelFlags* pf,
@@ -271,8 +280,7 @@ void PrepareRowAnyCpu(int w, bool sums, const float* d, const float* a, const Pi
                       float* cw, float* ca, float* lo, float* hi, float* n, float* sum,
                       float* sum2) {
 #if defined(TOFCAM_FLYING_PIXEL_AVX512)
-  static const bool avx512 = CpuHasAvx512();
-  if (avx512 && !portable_only.load(std::memory_order_relaxed)) {
+  if (UseAvx512Forms()) {
     PrepareRowShifted16(w, sums, d, a, pf, next_d, next_a, next_pf, cw, ca, lo, hi, n, sum, sum2);
     return;
   }
@@ -504,8 +512,7 @@ TOFCAM_AVX512_TARGET std::uint32_t DecideTwoRows16(int w, const Thresholds& t, c
 // DecideTwoRows.
 std::uint32_t DecideTwoRowsAnyCpu(int w, const Thresholds& t, const RowPair& p) {
 #if defined(TOFCAM_FLYING_PIXEL_AVX512)
-  static const bool avx512 = CpuHasAvx512();
-  if (avx512 && !portable_only.load(std::memory_order_relaxed)) return DecideTwoRows16(w, t, p);
+  if (UseAvx512Forms()) return DecideTwoRows16(w, t, p);
 #endif
   return DecideTwoRows(w, t, p.lu, p.lm, p.lv, p.lx, p.hu, p.hm, p.hv, p.hx, p.dm, p.dv, p.cm, p.cv,
                        p.nu, p.nm, p.nv, p.nx, p.su, p.sm, p.sv, p.sx, p.qu, p.qm, p.qv, p.qx, p.fm,
