@@ -5,6 +5,7 @@
 #include <unistd.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -24,9 +25,12 @@ namespace fs = std::filesystem;
 class RecordingTest : public ::testing::Test {
  protected:
   void SetUp() override {
+    // A parameterised test's name has a '/' ("RecordThenPlayIsBitExact/0"): flattened, so that
+    // TearDown removes the whole directory and not only its last component.
+    std::string name = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    std::replace(name.begin(), name.end(), '/', '_');
     dir_ = fs::temp_directory_path() /
-           ("tofcam_recording_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+           ("tofcam_recording_test_" + std::to_string(::getpid()) + "_" + name);
     fs::create_directories(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }

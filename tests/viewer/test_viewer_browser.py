@@ -45,6 +45,15 @@ def stop(proc):
         proc.wait()
 
 
+def remove_tree(path):
+    """Removes a directory that exiting Chromium helpers may still write into for a moment."""
+    for _ in range(20):
+        shutil.rmtree(path, ignore_errors=True)
+        if not os.path.exists(path):
+            return
+        time.sleep(0.25)
+
+
 class DevTools:
     """A minimal Chrome DevTools Protocol client over one page's websocket."""
 
@@ -112,7 +121,7 @@ def start_browser():
         yield DevTools(page["webSocketDebuggerUrl"])
     finally:
         stop(proc)
-        shutil.rmtree(profile, ignore_errors=True)
+        remove_tree(profile)
 
 
 @pytest.fixture

@@ -4,9 +4,11 @@
 
 #include <gtest/gtest.h>
 #include <httplib.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstring>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
@@ -31,7 +33,10 @@ class ViewerServerTest : public ::testing::Test {
     ViewerOptions o;
     o.port = 0;
     o.camera_spec = "sim:hand";
-    o.record_dir = ::testing::TempDir() + "tofcam_view_test";
+    // Per process and test, removed in TearDown (recordings made by the tests go there).
+    record_dir_ = ::testing::TempDir() + "tofcam_view_test_" + std::to_string(::getpid()) + "_" +
+                  ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    o.record_dir = record_dir_;
     PipelineOptions p;
     server_ = std::make_unique<ViewerServer>(o, p, OpenSim);
     server_->Start();
@@ -39,7 +44,11 @@ class ViewerServerTest : public ::testing::Test {
     client_->set_read_timeout(5, 0);
     WaitFrames(2);
   }
-  void TearDown() override { server_->Stop(); }
+  void TearDown() override {
+    server_->Stop();
+    std::error_code ignored;  // a failed removal must not hide the test's own result
+    std::filesystem::remove_all(record_dir_, ignored);
+  }
 
   // Waits (bounded) until the loop has processed `more` further frames; false on timeout.
   bool WaitFrames(long long more) {
@@ -57,6 +66,7 @@ class ViewerServerTest : public ::testing::Test {
     return r->status;
   }
 
+  std::string record_dir_;
   std::unique_ptr<ViewerServer> server_;
   std::unique_ptr<httplib::Client> client_;
 };
