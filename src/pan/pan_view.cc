@@ -30,13 +30,13 @@ constexpr std::size_t kChunk = 4096;
 // MakePointCloud) moved into the base frame (r * p + t, the same float operations as
 // TransformPointCloud), whether it is valid (no reject flag, finite), and its squared distance
 // from the rotation centre in double (each square exact, two roundings): the z-buffer's key.
-TOFCAM_HOT_LOOP void BasePoints(std::size_t n, const float* __restrict d,
-                                const std::uint16_t* __restrict flags, std::uint16_t nan_mask,
-                                const float* __restrict rx, const float* __restrict ry,
-                                const float* __restrict rz, const float* __restrict r,
-                                const float* __restrict t, float* __restrict bx,
-                                float* __restrict by, float* __restrict bz,
-                                std::uint8_t* __restrict valid, double* __restrict range2) {
+TOFCAM_HOT_LOOP_WIDE void BasePoints(std::size_t n, const float* __restrict d,
+                                     const std::uint16_t* __restrict flags, std::uint16_t nan_mask,
+                                     const float* __restrict rx, const float* __restrict ry,
+                                     const float* __restrict rz, const float* __restrict r,
+                                     const float* __restrict t, float* __restrict bx,
+                                     float* __restrict by, float* __restrict bz,
+                                     std::uint8_t* __restrict valid, double* __restrict range2) {
   constexpr float kMax = std::numeric_limits<float>::max();
   for (std::size_t i = 0; i < n; ++i) {
     const bool keep = (static_cast<unsigned>((flags[i] & nan_mask) == 0) &
@@ -128,6 +128,25 @@ TOFCAM_HOT_LOOP std::uint32_t MaskInvalid(std::size_t n, const std::uint8_t* __r
     rechecks += static_cast<std::uint32_t>(c == internal::kRecheckCell);
   }
   return rechecks;
+}
+
+// The first i0 + 64k (k >= 0) whose block of 64 cells holds kRecheckCell, or the first whose
+// block would pass n. One lane reduction per block: GCC extracts the lanes one by one.
+TOFCAM_HOT_LOOP std::size_t NextRecheckBlock(std::size_t i0, std::size_t n,
+                                             const std::int32_t* __restrict cell) {
+  using I8 = std::int32_t __attribute__((vector_size(32)));
+  for (; i0 + 64 <= n; i0 += 64) {
+    I8 hit = {};
+    for (std::size_t j = 0; j < 64; j += 8) {
+      I8 v;
+      std::memcpy(&v, cell + i0 + j, sizeof v);
+      hit |= v == internal::kRecheckCell;
+    }
+    std::uint64_t w[4];
+    std::memcpy(w, &hit, sizeof w);
+    if ((w[0] | w[1] | w[2] | w[3]) != 0) break;
+  }
+  return i0;
 }
 
 // Reused buffers of MakePanView: per chunk, except the stand-ins for missing channels (per frame).
@@ -269,10 +288,10 @@ static_assert(sizeof(ZCell) == 16);
 // The splat's inputs per point: its key (range2 where it has a cell, else +inf, which never
 // wins), a cell index that is always valid (0 for points without one) and its distance and
 // amplitude as one 8-byte word (the second half of its ZCell).
-TOFCAM_HOT_LOOP void SplatInputs(std::size_t n, std::int32_t* __restrict cell,
-                                 const double* __restrict range2, const float* __restrict d,
-                                 const float* __restrict a, double* __restrict key,
-                                 std::uint64_t* __restrict da) {
+TOFCAM_HOT_LOOP_WIDE void SplatInputs(std::size_t n, std::int32_t* __restrict cell,
+                                      const double* __restrict range2, const float* __restrict d,
+                                      const float* __restrict a, double* __restrict key,
+                                      std::uint64_t* __restrict da) {
   for (std::size_t i = 0; i < n; ++i) {
     const bool inside = cell[i] >= 0;
     key[i] = inside ? range2[i] : std::numeric_limits<double>::infinity();
@@ -548,28 +567,19 @@ std::size_t PanCells(std::size_t n, const PanStrip& s, const float* x, const flo
   f.cut = static_cast<float>(16.0 * kE * q_max);
   FastCells(n, f, x, y, z, cell);
   const std::size_t rechecks = MaskInvalid(n, valid, cell);
-  // A few per mille of the points (0.3 % at SR-2 on the default strip): find them eight at a
-  // time. Two cells per 64-bit word; a word holding kRecheckCell in either half has a zero half
-  // after the XOR, which the classic zero-lane test finds exactly (a borrow crosses into the
-  // high half only when the low half is zero already).
-  constexpr std::uint64_t kPair = 0xFFFFFFFEFFFFFFFEull;  // kRecheckCell twice
-  constexpr std::uint64_t kLow = 0x0000000100000001ull, kHigh = 0x8000000080000000ull;
+  // A few per mille of the points (0.3 % at SR-2 on the default strip): skip blocks of
+  // 64 cells without one with vector compares (NextRecheckBlock).
   std::size_t left = rechecks;
   std::size_t i0 = 0;
-  for (; left > 0 && i0 + 8 <= n; i0 += 8) {
-    std::uint64_t w[4];
-    std::memcpy(w, cell + i0, sizeof w);
-    std::uint64_t zero_half = 0;
-    for (std::uint64_t v : w) {
-      const std::uint64_t e = v ^ kPair;
-      zero_half |= (e - kLow) & ~e & kHigh;
-    }
-    if (zero_half == 0) continue;
-    for (std::size_t i = i0; i < i0 + 8; ++i) {
+  while (left > 0) {
+    i0 = NextRecheckBlock(i0, n, cell);
+    if (i0 + 64 > n) break;
+    for (std::size_t i = i0; i < i0 + 64; ++i) {
       if (cell[i] != kRecheckCell) continue;
       cell[i] = ExactCell(s, x[i], y[i], z[i]);
       --left;
     }
+    i0 += 64;
   }
   for (std::size_t i = i0; left > 0 && i < n; ++i) {
     if (cell[i] != kRecheckCell) continue;
