@@ -2,8 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "../filters/hot_loop.h"
 #include "../pipeline/stage_kernels.h"
@@ -57,6 +63,63 @@ TOFCAM_HOT_LOOP void Project(std::size_t n, const float* __restrict d,
     y[i] = di * ry[i];
     z[i] = di * rz[i];
   }
+}
+
+// n bytes from src to dst, the 64-byte blocks from dst's first 16-byte boundary on with
+// non-temporal stores (SSE2, so every x86-64 CPU; elsewhere a plain copy). The caller fences.
+void StreamBytes(const void* src_v, void* dst_v, std::size_t n) {
+  const auto* src = static_cast<const unsigned char*>(src_v);
+  auto* dst = static_cast<unsigned char*>(dst_v);
+  std::size_t i = 0;
+#if defined(__SSE2__)
+  i = std::min(n, (16 - reinterpret_cast<std::uintptr_t>(dst) % 16) % 16);
+  std::memcpy(dst, src, i);
+  for (; i + 64 <= n; i += 64) {
+    __m128i v[4];
+    std::memcpy(v, src + i, sizeof v);
+    for (int k = 0; k < 4; ++k)
+      _mm_stream_si128(reinterpret_cast<__m128i*>(dst + i + 16 * k), v[k]);
+  }
+#endif
+  std::memcpy(dst + i, src + i, n - i);
+}
+
+// CloudSpan for a cloud too large for the caches (kStreamCloudBytes): the points are written
+// with non-temporal stores, which spare the memory reads that ordinary stores make to fetch
+// each output line first (a third of the cloud's traffic). The points are projected into an
+// L1-sized block and streamed from there; the same values as the plain path.
+void CloudSpanStreaming(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,
+                        std::size_t n, const float* d, const PixelFlags* f, const float* a,
+                        const float* i, const float* dl, PointCloud& cloud) {
+  const auto channel = [&](const float* src, std::vector<float>& dst) {
+    if (src == nullptr) {
+      std::fill(dst.begin() + begin, dst.begin() + begin + n, kNan);
+    } else {
+      StreamBytes(src, dst.data() + begin, n * sizeof(float));
+    }
+  };
+  channel(a, cloud.amplitude);
+  channel(i, cloud.intensity);
+  channel(dl, cloud.delta_l_m);
+  if (f == nullptr) {
+    std::fill(cloud.flags.begin() + begin, cloud.flags.begin() + begin + n, PixelFlags());
+  } else {
+    StreamBytes(f, cloud.flags.data() + begin, n * sizeof(PixelFlags));
+  }
+  constexpr std::size_t kBlock = 1024;  // 12 KB of points
+  alignas(64) float px[kBlock], py[kBlock], pz[kBlock];
+  for (std::size_t b = 0; b < n; b += kBlock) {
+    const std::size_t m = std::min(kBlock, n - b);
+    const std::size_t at = begin + b;
+    Project(m, d + b, f == nullptr ? nullptr : f + b, options.nan_mask, rays.x.data() + at,
+            rays.y.data() + at, rays.z.data() + at, px, py, pz);
+    StreamBytes(px, cloud.x.data() + at, m * sizeof(float));
+    StreamBytes(py, cloud.y.data() + at, m * sizeof(float));
+    StreamBytes(pz, cloud.z.data() + at, m * sizeof(float));
+  }
+#if defined(__SSE2__)
+  _mm_sfence();  // the streamed lines are visible before the cloud is handed on
+#endif
 }
 
 }  // namespace
@@ -131,6 +194,10 @@ void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cl
 void CloudSpan(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,
                std::size_t n, const float* d, const PixelFlags* f, const float* a, const float* i,
                const float* dl, PointCloud& cloud) {
+  if (cloud.size() * kCloudBytesPerPoint >= kStreamCloudBytes) {
+    CloudSpanStreaming(rays, options, begin, n, d, f, a, i, dl, cloud);
+    return;
+  }
   CopyOrNan(a, begin, n, cloud.amplitude);
   CopyOrNan(i, begin, n, cloud.intensity);
   CopyOrNan(dl, begin, n, cloud.delta_l_m);

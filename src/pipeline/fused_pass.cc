@@ -68,16 +68,21 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   }
   if (s.cloud != nullptr) kernels::PrepareCloud(m, *s.rays, *out.cloud);
 
-  // The stages run one after the other over chunks of kChunkPixels, directly on the frame's
-  // buffers. Smaller, cache-sized blocks (512 pixels in an L1 scratch with the results copied
-  // out, non-temporal stores beyond 24 MiB; or 2K-64K pixels in place) were measured too, with
-  // bit-identical results, and were slower or no faster on the 2-core Zen 5 test machine: there
-  // each stage's working set stays in the 1 MiB L2 at SR-2 size and in the L3 at VGA and 1 MP,
-  // so the extra passes cost little, while per-block calls and copies (and the DRAM writes of
-  // streaming stores) cost more (docs/benchmarks.md). The chunk bounds the scratch.
-  constexpr std::size_t kChunk = kernels::kChunkPixels;
+  // The stages run one after the other, directly on the frame's buffers: over the whole frame
+  // when it is small enough for its channels to stay in the caches between the stages (SR-2,
+  // VGA), and over chunks of kChunkPixels (16K) when its cloud is large enough to be streamed
+  // past the caches (kStreamCloudBytes, CloudSpan): then a chunk's channels stay in the core's
+  // L2 from one stage to the next and the streamed cloud saves the reads of its output lines.
+  // At 1 MP that took the chain from 1.58-1.72x its memcpy floor to 1.24-1.52x (pipeline_bench
+  // and tofcam bench, interleaved runs; docs/benchmarks.md). Either alone was measured no
+  // faster: without streaming the cloud's stores read every output line from memory first;
+  // without chunks the streamed channels are read back from memory. Chunks at VGA were measured
+  // up to 12 % slower (their channels stay in the L3 anyway), so smaller frames run in one
+  // piece. Chunks of 2^15-2^16 pixels measured the same as 2^14; 16K keeps a chunk's working set
+  // (about 40 bytes a pixel) within a smaller L2 too.
   const std::size_t n = m.radial_distance_m.size();
-  thread_local std::vector<PixelFlags> raised_chunk;
+  const std::size_t chunk =
+      n * kernels::kCloudBytesPerPoint >= kernels::kStreamCloudBytes ? kernels::kChunkPixels : n;
   const bool intensity = m.has_intensity();
   const bool accuracy = s.accuracy != nullptr;
   float* d = m.radial_distance_m.data();
@@ -85,8 +90,8 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   float* in = intensity ? m.intensity.data() : nullptr;
   float* dl = accuracy ? m.delta_l_m.data() : nullptr;
   PixelFlags* f = m.flags.data();
-  for (std::size_t begin = 0; begin < n; begin += kChunk) {
-    const std::size_t len = std::min(kChunk, n - begin);
+  for (std::size_t begin = 0; begin < n; begin += chunk) {
+    const std::size_t len = std::min(chunk, n - begin);
     float* cd = d + begin;
     float* ca = a + begin;
     float* ci = intensity ? in + begin : nullptr;

@@ -17,8 +17,9 @@
 
 namespace tofcam::kernels {
 
-// Pixels per chunk of the fused pass (src/pipeline/fused_pass.cc explains the size).
-inline constexpr std::size_t kChunkPixels = std::size_t{1} << 20;
+// Pixels per chunk of the fused pass for frames whose cloud is streamed (kStreamCloudBytes);
+// smaller frames run in one piece (src/pipeline/fused_pass.cc explains both).
+inline constexpr std::size_t kChunkPixels = std::size_t{1} << 14;
 
 // dst[i] |= src[i] for i in [0, n); dst and src do not overlap.
 void OrFlags(std::size_t n, PixelFlags* dst, const PixelFlags* src);
@@ -90,8 +91,16 @@ void PixelFiltersOrSpan(const PixelFilterPlan& plan, std::size_t n, const float*
 void CheckCloudInputs(const MetricFrame& frame, const RayTable& rays);
 // CheckCloudInputs, then sizes the cloud.
 void PrepareCloud(const MetricFrame& frame, const RayTable& rays, PointCloud& cloud);
+// Bytes of one point of a PointCloud (x, y, z, amplitude, intensity, ΔL, flags).
+inline constexpr std::size_t kCloudBytesPerPoint = 6 * sizeof(float) + sizeof(PixelFlags);
+// From this size of cloud on (about 650k points, e.g. 1024x1024), CloudSpan writes it with
+// non-temporal stores: a cloud this large does not stay in a small robot computer's last-level
+// cache for its reader, so an ordinary store's read of each output line first is wasted traffic.
+inline constexpr std::size_t kStreamCloudBytes = std::size_t{16} << 20;
+
 // Points [begin, begin + n) of the cloud from the span's channels (pointers at the span's first
-// pixel; a, i, dl, f may be nullptr when the frame has none: NaN / clear flags).
+// pixel; a, i, dl, f may be nullptr when the frame has none: NaN / clear flags). Clouds of
+// kStreamCloudBytes or more are written with non-temporal stores (the same values).
 void CloudSpan(const RayTable& rays, const PointCloudOptions& options, std::size_t begin,
                std::size_t n, const float* d, const PixelFlags* f, const float* a, const float* i,
                const float* dl, PointCloud& cloud);

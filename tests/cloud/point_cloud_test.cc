@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "pipeline/stage_kernels.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -125,6 +126,68 @@ TEST(PointCloudTest, IntoReusedCloudEqualsFreshCloud) {
   MakePointCloudInto(no_flags, rays, reused);
   EXPECT_TRUE(reused.flags[(5 * k.width) + 5].None());
   EXPECT_EQ(reused.CountValid(), reused.size());
+}
+
+// A cloud of kStreamCloudBytes or more is written with non-temporal stores; its values must be
+// the definition's: d x ray in float (NaN where a reject bit is set or d is not finite), the
+// channels copied, NaN / clear flags for missing ones. Checked against that per point, on a
+// frame with an odd width (rows start at every alignment) and over two calls into one cloud.
+TEST(PointCloudTest, LargeCloudIsStreamedWithTheSameValues) {
+  const std::size_t points = kernels::kStreamCloudBytes / kernels::kCloudBytesPerPoint + 1;
+  CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
+  k.width = 1021;
+  k.height = static_cast<int>((points + 1020) / 1021);
+  k.cx_px = 510.0;
+  k.cy_px = k.height / 2.0;
+  const RayTable rays = MakeRayTable(k);
+  PointCloud cloud;
+  for (const bool channels : {true, false}) {
+    SCOPED_TRACE(channels ? "all channels" : "distance only");
+    MetricFrame f;
+    f.radial_distance_m = Image<float>(k.width, k.height);
+    const std::size_t n = f.radial_distance_m.size();
+    ASSERT_GE(n * kernels::kCloudBytesPerPoint, kernels::kStreamCloudBytes);
+    for (std::size_t i = 0; i < n; ++i) f.radial_distance_m[i] = 0.25f + 1e-5f * (i % 70001);
+    f.radial_distance_m[77] = std::numeric_limits<float>::quiet_NaN();
+    f.radial_distance_m[n - 1] = std::numeric_limits<float>::infinity();
+    if (channels) {
+      f.amplitude = Image<float>(k.width, k.height);
+      f.intensity = Image<float>(k.width, k.height);
+      f.delta_l_m = Image<float>(k.width, k.height);
+      f.flags = Image<PixelFlags>(k.width, k.height);
+      for (std::size_t i = 0; i < n; ++i) {
+        f.amplitude[i] = static_cast<float>(i);
+        f.intensity[i] = 0.5f * static_cast<float>(i);
+        f.delta_l_m[i] = 1e-3f * static_cast<float>(i % 97);
+        f.flags[i] = i % 13 == 0   ? PixelFlags(Flag::kLowAmplitude)
+                     : i % 17 == 0 ? PixelFlags(Flag::kMixed)  // not a reject bit
+                                   : PixelFlags();
+      }
+    }
+    MakePointCloudInto(f, rays, cloud);
+    ASSERT_EQ(cloud.size(), n);
+    std::size_t mismatches = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const float d = f.radial_distance_m[i];
+      const bool rejected = channels && f.flags[i].Has(Flag::kLowAmplitude);
+      const bool nan = rejected || !std::isfinite(d);
+      const float ex = nan ? 0.0f : d * rays.x[i], ey = nan ? 0.0f : d * rays.y[i],
+                  ez = nan ? 0.0f : d * rays.z[i];
+      const auto same = [nan](float got, float want) {
+        return nan ? std::isnan(got) : got == want;
+      };
+      const auto same_or_nan = [channels](float got, float want) {
+        return channels ? got == want : std::isnan(got);
+      };
+      const bool ok = same(cloud.x[i], ex) && same(cloud.y[i], ey) && same(cloud.z[i], ez) &&
+                      same_or_nan(cloud.amplitude[i], channels ? f.amplitude[i] : 0.0f) &&
+                      same_or_nan(cloud.intensity[i], channels ? f.intensity[i] : 0.0f) &&
+                      same_or_nan(cloud.delta_l_m[i], channels ? f.delta_l_m[i] : 0.0f) &&
+                      cloud.flags[i] == (channels ? f.flags[i] : PixelFlags());
+      if (!ok && ++mismatches <= 5) ADD_FAILURE() << "point " << i;
+    }
+    EXPECT_EQ(mismatches, 0u);
+  }
 }
 
 TEST(PointCloudTest, ErrorsAreReported) {

@@ -136,7 +136,8 @@ void ExpectSameCloud(const PointCloud& a, const PointCloud& b) {
 }
 
 TEST(PaperChainTest, EqualsTheStagesCalledOneByOne) {
-  // 1100 x 960 pixels: more than one chunk of the pass (2^20 pixels).
+  // 1100 x 960 pixels: a cloud large enough to be streamed (kernels::kStreamCloudBytes), so the
+  // pass runs in chunks of 2^14 pixels (64 and a partial one).
   for (const auto& [w, h] :
        {std::pair{160, 124}, std::pair{157, 123}, std::pair{700, 3}, std::pair{1100, 960}}) {
     for (const bool table : {false, true}) {
