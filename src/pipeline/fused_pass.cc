@@ -73,13 +73,14 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   // VGA), and over chunks of kChunkPixels (16K) when its cloud is large enough to be streamed
   // past the caches (kStreamCloudBytes, CloudSpan): then a chunk's channels stay in the core's
   // L2 from one stage to the next and the streamed cloud saves the reads of its output lines.
-  // At 1 MP that took the chain from 1.58-1.72x its memcpy floor to 1.24-1.52x (pipeline_bench
-  // and tofcam bench, interleaved runs; docs/benchmarks.md). Either alone was measured no
-  // faster: without streaming the cloud's stores read every output line from memory first;
-  // without chunks the streamed channels are read back from memory. Chunks at VGA were measured
-  // up to 12 % slower (their channels stay in the L3 anyway), so smaller frames run in one
-  // piece. Chunks of 2^15-2^16 pixels measured the same as 2^14; 16K keeps a chunk's working set
-  // (about 40 bytes a pixel) within a smaller L2 too.
+  // At 1 MP that took the chain from a median 1.60x its memcpy floor to 1.40x (pipeline_bench,
+  // ten interleaved runs each, on a machine with a busy second core; docs/benchmarks.md). Either
+  // alone was measured no faster: without streaming the cloud's stores read every output line
+  // from memory first; without chunks the streamed channels are read back from memory.
+  // Streaming the metric frame too (computed in an L2 scratch) was slower: median 1.57x. Chunks
+  // at VGA were measured up to 12 % slower (their channels stay in the L3 anyway), so smaller
+  // frames run in one piece. Chunks of 2^15-2^16 pixels measured the same as 2^14; 16K keeps a
+  // chunk's working set (about 40 bytes a pixel) within a smaller L2 too.
   const std::size_t n = m.radial_distance_m.size();
   const std::size_t chunk =
       n * kernels::kCloudBytesPerPoint >= kernels::kStreamCloudBytes ? kernels::kChunkPixels : n;
