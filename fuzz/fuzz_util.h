@@ -30,10 +30,8 @@ class TempFile {
   }
   TempFile(const TempFile&) = delete;
   TempFile& operator=(const TempFile&) = delete;
-  // The parsers take the path.
-  operator const std::filesystem::path&() const {
-    return path_;
-  }  // NOLINT(google-explicit-constructor)
+  // Implicit on purpose: the parsers take the path.
+  operator const std::filesystem::path&() const { return path_; }
 
  private:
   std::filesystem::path path_;

@@ -366,12 +366,11 @@ void RecordingWriter::Append(const Frame& frame) {
     m.AppendRow(m.info[i].get(), kInfoNames[i], InfoMemType(i), values[i]);
   }
   // The committed count is written last: a reader trusts only frames below it. Two flushes put
-  // it on disk strictly after the frame. Within one flush HDF5 writes the raw data first, then
-  // the dirty metadata in file-address order, and the root group's header (which holds the
-  // count) lies before the datasets' chunk indexes; so with the count in its frame's flush, a
-  // recorder killed inside that flush could leave the new count beside a frame whose chunk
-  // index entry was not on disk yet: a readable frame of fill values. The kill test saw such a
-  // frame once in about 110 rounds on a loaded machine. The frame first, then the count.
+  // it on disk strictly after the frame. One flush writes the raw data first, but then its dirty
+  // metadata in the metadata cache's own order (by file address), which need not put the count
+  // after the datasets' chunk indexes; a recorder killed inside that flush could then leave the
+  // new count beside a frame that was not wholly on disk. The kill test once read such a frame
+  // back wrong (in about 110 rounds on a loaded machine). The frame first, then the count.
   const auto flush = [&m] {
     if (m.options.flush_each_frame && H5Fflush(m.file.get(), H5F_SCOPE_GLOBAL) < 0) {
       Fail(ErrorCode::kIo, m.path, "cannot flush recording (disk full?)");

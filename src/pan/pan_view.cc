@@ -81,10 +81,10 @@ struct FloatStrip {
 // otherwise, and near the axis (rho < 2e-6, ExactCell's limit is 1e-6), beyond 1e18 m or
 // |t| = 1e4, or near the azimuth's branch cut (pf < 0, |pl| <= 16e q_max rho, where the sign of
 // pl, and with it az = +-pi, can differ between float and double), it is left to ExactCell.
-// NaN fails every comparison: rechecked. A fused multiply-add (the AVX-512 clone) only rounds
-// less, so the bounds hold for every clone and every clone gives ExactCell's cells. The AVX-512
-// clone: 8 % (SR-2) to 13 % (1 MP) faster assembly on Zen 4; with 16 registers the AVX2 one
-// spills.
+// NaN fails every comparison: rechecked. The file is built without fused multiply-adds
+// (src/pan/CMakeLists.txt), though one would only round less and the bounds would still hold.
+// The AVX-512 clone: 8 % (SR-2) to 13 % (1 MP) faster assembly on Zen 4, measured when the clone
+// still used fused multiply-adds; with 16 registers the AVX2 one spills.
 TOFCAM_HOT_LOOP_WIDE void FastCells(std::size_t n, const FloatStrip& s, const float* __restrict x,
                                     const float* __restrict y, const float* __restrict z,
                                     std::int32_t* __restrict cell) {

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstddef>
 #include <string>
-#include <vector>
 
 #include "../calibration/calibration_kernel.h"
 #include "stage_kernels.h"
@@ -68,22 +67,23 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   }
   if (s.cloud != nullptr) kernels::PrepareCloud(m, *s.rays, *out.cloud);
 
-  // The stages run one after the other, directly on the frame's buffers: over the whole frame
-  // when it is small enough for its channels to stay in the caches between the stages (SR-2,
-  // VGA), and over chunks of kChunkPixels (16K) when its cloud is large enough to be streamed
-  // past the caches (kStreamCloudBytes, CloudSpan): then a chunk's channels stay in the core's
-  // L2 from one stage to the next and the streamed cloud saves the reads of its output lines.
-  // At 1 MP that took the chain from a median 1.60x its memcpy floor to 1.40x (pipeline_bench,
-  // ten interleaved runs each, on a machine with a busy second core; docs/benchmarks.md). Either
-  // alone was measured no faster: without streaming the cloud's stores read every output line
-  // from memory first; without chunks the streamed channels are read back from memory.
-  // Streaming the metric frame too (computed in an L2 scratch) was slower: median 1.57x. Chunks
-  // at VGA were measured up to 12 % slower (their channels stay in the L3 anyway), so smaller
-  // frames run in one piece. Chunks of 2^15-2^16 pixels measured the same as 2^14; 16K keeps a
-  // chunk's working set (about 40 bytes a pixel) within a smaller L2 too.
+  // The stages run one after the other, directly on the frame's buffers: over the whole frame,
+  // except when the pass makes a cloud large enough to be streamed past the caches
+  // (kStreamCloudBytes, CloudSpan). Then they run over chunks of kChunkPixels (16K), so that a
+  // chunk's channels stay in the core's L2 from one stage to the next, and the streamed cloud
+  // saves the reads of its output lines. At 1 MP that took the chain from a median 1.60x its
+  // memcpy floor to 1.40x (pipeline_bench, ten interleaved runs each, on a machine with a busy
+  // second core; docs/benchmarks.md). Either alone was measured no faster: without streaming the
+  // cloud's stores read every output line from memory first; without chunks the streamed
+  // channels are read back from memory. Streaming the metric frame too (computed in an L2
+  // scratch) was slower: median 1.57x. Chunks at VGA were measured up to 12 % slower (there the
+  // channels stay in the L3 anyway), so other frames run in one piece. Chunks of 2^15-2^16
+  // pixels measured the same as 2^14; 16K keeps a chunk's working set (about 40 bytes a pixel)
+  // within a smaller L2 too.
   const std::size_t n = m.radial_distance_m.size();
-  const std::size_t chunk =
-      n * kernels::kCloudBytesPerPoint >= kernels::kStreamCloudBytes ? kernels::kChunkPixels : n;
+  const bool streamed_cloud =
+      s.cloud != nullptr && n * kernels::kCloudBytesPerPoint >= kernels::kStreamCloudBytes;
+  const std::size_t chunk = streamed_cloud ? kernels::kChunkPixels : n;
   const bool intensity = m.has_intensity();
   const bool accuracy = s.accuracy != nullptr;
   float* d = m.radial_distance_m.data();

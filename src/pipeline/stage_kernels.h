@@ -17,8 +17,8 @@
 
 namespace tofcam::kernels {
 
-// Pixels per chunk of the fused pass for frames whose cloud is streamed (kStreamCloudBytes);
-// smaller frames run in one piece (src/pipeline/fused_pass.cc explains both).
+// Pixels per chunk of the fused pass when it makes a streamed cloud (kStreamCloudBytes); other
+// frames run in one piece (src/pipeline/fused_pass.cc explains both).
 inline constexpr std::size_t kChunkPixels = std::size_t{1} << 14;
 
 // dst[i] |= src[i] for i in [0, n); dst and src do not overlap.

@@ -4,7 +4,9 @@
 
 #include <Eigen/Core>
 #include <cmath>
+#include <cstring>
 #include <limits>
+#include <vector>
 
 #include "pipeline/stage_kernels.h"
 #include "tofcam/core/error.h"
@@ -130,8 +132,9 @@ TEST(PointCloudTest, IntoReusedCloudEqualsFreshCloud) {
 
 // A cloud of kStreamCloudBytes or more is written with non-temporal stores; its values must be
 // the definition's: d x ray in float (NaN where a reject bit is set or d is not finite), the
-// channels copied, NaN / clear flags for missing ones. Checked against that per point, on a
-// frame with an odd width (rows start at every alignment) and over two calls into one cloud.
+// channels copied, NaN / clear flags for missing ones. Checked against that per point, over two
+// calls into one cloud; then the same cloud written span by span from odd starting points (as
+// the fused pass writes it chunk by chunk), so that the streamed lines start at every alignment.
 TEST(PointCloudTest, LargeCloudIsStreamedWithTheSameValues) {
   const std::size_t points = kernels::kStreamCloudBytes / kernels::kCloudBytesPerPoint + 1;
   CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
@@ -187,6 +190,29 @@ TEST(PointCloudTest, LargeCloudIsStreamedWithTheSameValues) {
       if (!ok && ++mismatches <= 5) ADD_FAILURE() << "point " << i;
     }
     EXPECT_EQ(mismatches, 0u);
+
+    PointCloud spans;
+    kernels::PrepareCloud(f, rays, spans);
+    const auto at = [](const auto& image, std::size_t b) {
+      return image.empty() ? nullptr : image.data() + b;
+    };
+    const std::size_t bounds[] = {0, 1, 4, 19, 12345, n - 70, n};
+    for (int s = 0; s + 1 < 7; ++s) {
+      const std::size_t b = bounds[s], len = bounds[s + 1] - b;
+      kernels::CloudSpan(rays, PointCloudOptions(), b, len, f.radial_distance_m.data() + b,
+                         at(f.flags, b), at(f.amplitude, b), at(f.intensity, b), at(f.delta_l_m, b),
+                         spans);
+    }
+    const auto same_bits = [](const std::vector<float>& x, const std::vector<float>& y) {
+      return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * 4) == 0;
+    };
+    EXPECT_TRUE(same_bits(spans.x, cloud.x));
+    EXPECT_TRUE(same_bits(spans.y, cloud.y));
+    EXPECT_TRUE(same_bits(spans.z, cloud.z));
+    EXPECT_TRUE(same_bits(spans.amplitude, cloud.amplitude));
+    EXPECT_TRUE(same_bits(spans.intensity, cloud.intensity));
+    EXPECT_TRUE(same_bits(spans.delta_l_m, cloud.delta_l_m));
+    EXPECT_TRUE(spans.flags == cloud.flags);
   }
 }
 
