@@ -28,13 +28,6 @@ void CheckRays(const MetricFrame& frame, const RayTable& rays, const char* filte
 // no null checks (valid until the next call on this thread).
 const PixelFlags* PriorOrZeros(const Image<PixelFlags>& prior, std::size_t n);
 
-// Tests only: with true, the flying-pixel filter runs its portable loops (row preparation, two-row
-// decision) even on an AVX-512 CPU, so both forms can be compared with the rule on one machine.
-void UsePortableFlyingPixelForTesting(bool portable);
-// Whether the flying-pixel filter has its AVX-512 forms (row preparation, two-row decision) and
-// this CPU runs them.
-bool FlyingPixelAvx512Available();
-
 // Per-pixel filters OR their bit into `out` (the frame's size).
 void AccuracyInto(const MetricFrame& frame, const AccuracyThresholdOptions& o,
                   Image<PixelFlags>& out);

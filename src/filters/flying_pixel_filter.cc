@@ -1,7 +1,6 @@
 #include "tofcam/filters/flying_pixel_filter.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -10,12 +9,12 @@
 #include <type_traits>
 #include <vector>
 
+#include "../core/avx512_forms.h"
 #include "filter_internal.h"
 #include "simd.h"
 
-// The AVX-512 forms (row preparation, two-row decision): x86-64 with GCC or clang, except in
-// AddressSanitizer builds (TOFCAM_NO_CLONES, hot_loop.h), which keep to the portable loops.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
+// The AVX-512 forms (row preparation, two-row decision): see src/core/avx512_forms.h.
+#if defined(TOFCAM_AVX512_FORMS)
 #define TOFCAM_FLYING_PIXEL_AVX512 1
 #include <immintrin.h>
 #endif
@@ -255,22 +254,10 @@ TOFCAM_AVX512_TARGET void PrepareRowShifted16(
 #if !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
-
-bool CpuHasAvx512() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
-         __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq");
-}
 #endif
 
-std::atomic<bool> portable_only{false};
-
 #if defined(TOFCAM_FLYING_PIXEL_AVX512)
-// Whether this CPU runs the AVX-512 forms (decided once) and no test asked for the portable ones.
-bool UseAvx512Forms() {
-  static const bool avx512 = CpuHasAvx512();
-  return avx512 && !portable_only.load(std::memory_order_relaxed);
-}
+using internal::UseAvx512Forms;
 #endif
 
 // PrepareRowShifted16 where the CPU has AVX-512 (unless a test asked for the portable form),
@@ -701,18 +688,6 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
       }
     }
   }
-}
-
-void UsePortableFlyingPixelForTesting(bool portable) {
-  portable_only.store(portable, std::memory_order_relaxed);
-}
-
-bool FlyingPixelAvx512Available() {
-#if defined(TOFCAM_FLYING_PIXEL_AVX512)
-  return CpuHasAvx512();
-#else
-  return false;
-#endif
 }
 
 }  // namespace filters_internal

@@ -8,6 +8,7 @@
 #include <limits>
 #include <random>
 
+#include "core/avx512_forms.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -202,6 +203,66 @@ TEST(FalseColorTest, EveryPixelFollowsTheLawOnWideRandomFrames) {
       EXPECT_GT(visible_count, w * h / 4);  // about 40 % with black outside
     }
   }
+}
+
+TEST(FalseColorTest, Avx512AndPortableFormsGiveTheSameBytes) {
+  // Rows of every width from 1 to 40 (every tail of a 16-pixel block) and a camera's 160, with
+  // the special values of the test above and distances that put 3t - 1 and 1 - 3t near 0 and
+  // 3 - 3t near 1, where a clamp on the wrong side would show; all four option combinations.
+  // On an AVX-512 CPU the default form is the 16-pixel kernel; it must give the portable forms'
+  // bytes exactly (the colours of a frame do not depend on the CPU).
+  const bool avx512 = internal::CpuHasAvx512();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<int> widths;
+  for (int w = 1; w <= 40; ++w) widths.push_back(w);
+  widths.push_back(160);
+  int lit = 0;
+  for (const int w : widths) {
+    const int h = 2 + w % 3;
+    MetricFrame f;
+    f.radial_distance_m = Image<float>(w, h);
+    f.amplitude = Image<float>(w, h);
+    f.flags = Image<PixelFlags>(w, h);
+    f.info.modulation_frequency_hz = 20e6;
+    for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+      const float x = u(rng);
+      // t = 1/3 and t = 0 (near = 0.5, far = 6.5, so d = 2.5 and 0.5), nudged by a few ulps.
+      const float knee = (x < 0.6f ? 2.5f : 0.5f) * (1.0f + 1e-7f * std::floor(8.0f * u(rng) - 4));
+      f.radial_distance_m[i] = x < 0.04f   ? nan
+                               : x < 0.06f ? inf
+                               : x < 0.08f ? -inf
+                               : x < 0.3f  ? knee
+                               : x < 0.35f ? -0.0f
+                                           : -1.0f + 9.0f * u(rng);
+      const float y = u(rng);
+      f.amplitude[i] = y < 0.05f ? nan : y < 0.1f ? -5.0f : y < 0.15f ? inf : 12000.0f * u(rng);
+      if (u(rng) < 0.1f) f.flags[i] = Flag::kSaturated;
+    }
+    for (const bool shade : {false, true}) {
+      for (const bool black : {false, true}) {
+        SCOPED_TRACE(testing::Message()
+                     << "width " << w << ", shading " << shade << ", black " << black);
+        FalseColorOptions o;
+        o.near_m = 0.5;
+        o.far_m = 6.5;
+        o.amplitude_shading = shade;
+        o.out_of_range_black = black;
+        internal::UsePortableFormsForTesting(true);
+        const Image<Rgb8> portable = FalseColor(f, o);
+        internal::UsePortableFormsForTesting(false);
+        const Image<Rgb8> fast = FalseColor(f, o);
+        for (std::size_t i = 0; i < fast.size(); ++i) {
+          ASSERT_EQ(fast[i], portable[i]) << "pixel " << i;
+          lit += fast[i] != Rgb8{0, 0, 0};
+        }
+      }
+    }
+  }
+  EXPECT_GT(lit, 1000);  // the comparison is not between black images
+  if (!avx512) GTEST_SKIP() << "no AVX-512 on this CPU: only the portable form was compared";
 }
 
 TEST(FalseColorTest, ErrorsAreReported) {

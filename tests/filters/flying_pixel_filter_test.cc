@@ -9,7 +9,8 @@
 #include <utility>
 #include <vector>
 
-#include "filter_internal.h"  // internal: the portable / AVX-512 switch (src/filters)
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
+#include "filter_internal.h"    // internal: FlyingPixelInto (src/filters)
 #include "test_scene.h"
 #include "tofcam/core/error.h"
 
@@ -264,7 +265,7 @@ TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::normal_distribution<float> noise(0.0f, 1.0f);
-  const bool avx512 = filters_internal::FlyingPixelAvx512Available();
+  const bool avx512 = internal::CpuHasAvx512();
   int flagged = 0;
   std::vector<std::pair<int, int>> sizes;
   for (int w = 1; w <= 70; ++w) sizes.emplace_back(w, 3 + w % 5);
@@ -288,7 +289,7 @@ TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
     }
     // The filter in one form: its flags, after checking them against the rule and the echo.
     auto run = [&](bool portable) {
-      filters_internal::UsePortableFlyingPixelForTesting(portable);
+      internal::UsePortableFormsForTesting(portable);
       ExpectMatchesRule(f, FlyingPixelOptions{});
       Image<PixelFlags> out(w, h), echo(w, h);
       filters_internal::FlyingPixelInto(f, f.flags, FlyingPixelOptions{}, out, &echo);
@@ -296,7 +297,7 @@ TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
         EXPECT_EQ(echo[i].bits(), out[i].bits() & static_cast<std::uint16_t>(Flag::kFlyingPixel))
             << i;
       }
-      filters_internal::UsePortableFlyingPixelForTesting(false);
+      internal::UsePortableFormsForTesting(false);
       return out;
     };
     const Image<PixelFlags> portable = run(true);

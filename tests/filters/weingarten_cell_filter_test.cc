@@ -7,6 +7,7 @@
 #include <map>
 #include <tuple>
 
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "test_scene.h"
 #include "tofcam/core/error.h"
 
@@ -299,6 +300,57 @@ TEST(WeingartenCellFilterTest, EveryFrameLengthCountsEachPointOnce) {
       const bool want = i % 5 != 0 && count[cell(i)] < 3;
       ASSERT_EQ(out[i].Has(Flag::kSparseCell), want) << "n " << n << " pixel " << i;
     }
+  }
+}
+
+TEST(WeingartenCellFilterTest, Avx512AndPortableFormsFlagTheSamePixels) {
+  // The scene frame with outliers (sparse cells among dense ones) cut to every width from 1 to 40
+  // (every tail of a 16-pixel block) plus the full frame, some pixels rejected: on an AVX-512 CPU
+  // the default form flags with a gather, the portable one with table reads; both must set the
+  // same bits, and keep every bit the frame's flags had.
+  test::Scene s = test::MakeScene();
+  for (int i = 0; i < 300; ++i) {
+    const int r = (i * 37) % s.frame.height(), c = (i * 91) % s.frame.width();
+    s.frame.radial_distance_m(r, c) = 0.3f + 0.021f * static_cast<float>(i);
+  }
+  for (int i = 0; i < 200; ++i) {
+    s.frame.flags((i * 13) % s.frame.height(), (i * 29) % s.frame.width()) = Flag::kHighDeltaL;
+  }
+  WeingartenCellOptions o;
+  o.voxel_size_m = 0.1;
+  o.min_points = 5;
+  std::vector<int> widths;
+  for (int w = 1; w <= 40; ++w) widths.push_back(w);
+  widths.push_back(s.frame.width());
+  int flagged = 0;
+  for (const int w : widths) {
+    SCOPED_TRACE(testing::Message() << "width " << w);
+    MetricFrame f;
+    f.radial_distance_m = Image<float>(w, s.frame.height());
+    f.flags = Image<PixelFlags>(w, s.frame.height());
+    RayTable rays{Image<float>(w, s.frame.height()), Image<float>(w, s.frame.height()),
+                  Image<float>(w, s.frame.height())};
+    for (int r = 0; r < s.frame.height(); ++r) {
+      for (int c = 0; c < w; ++c) {
+        f.radial_distance_m(r, c) = s.frame.radial_distance_m(r, c);
+        f.flags(r, c) = s.frame.flags(r, c);
+        rays.x(r, c) = s.rays.x(r, c);
+        rays.y(r, c) = s.rays.y(r, c);
+        rays.z(r, c) = s.rays.z(r, c);
+      }
+    }
+    internal::UsePortableFormsForTesting(true);
+    const Image<PixelFlags> portable = WeingartenCellFilter(f, rays, o);
+    internal::UsePortableFormsForTesting(false);
+    const Image<PixelFlags> fast = WeingartenCellFilter(f, rays, o);
+    for (std::size_t i = 0; i < fast.size(); ++i) {
+      ASSERT_EQ(fast[i].bits(), portable[i].bits()) << "pixel " << i;
+      flagged += fast[i].Has(Flag::kSparseCell);
+    }
+  }
+  EXPECT_GT(flagged, 1000);  // the comparison is not between unflagged images
+  if (!internal::CpuHasAvx512()) {
+    GTEST_SKIP() << "no AVX-512 on this CPU: only the portable form was compared";
   }
 }
 
