@@ -1,13 +1,8 @@
 #include "avx512_forms.h"
 
-#include <atomic>
-
 namespace tofcam::internal {
-namespace {
 
-std::atomic<bool> portable_only{false};
-
-}  // namespace
+std::atomic<bool> portable_forms_only{false};
 
 bool CpuHasAvx512() {
 #if defined(TOFCAM_AVX512_FORMS)
@@ -22,10 +17,8 @@ bool CpuHasAvx512() {
 #endif
 }
 
-bool UseAvx512Forms() { return CpuHasAvx512() && !portable_only.load(std::memory_order_relaxed); }
-
 void UsePortableFormsForTesting(bool portable) {
-  portable_only.store(portable, std::memory_order_relaxed);
+  portable_forms_only.store(portable, std::memory_order_relaxed);
 }
 
 }  // namespace tofcam::internal

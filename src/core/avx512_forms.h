@@ -7,6 +7,8 @@
 // AddressSanitizer (TOFCAM_NO_CLONES, src/filters/hot_loop.h), so that the sanitizer build checks
 // the portable loops the AVX-512 forms are tested against.
 
+#include <atomic>
+
 #include "../filters/hot_loop.h"
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
@@ -18,9 +20,15 @@ namespace tofcam::internal {
 /// Whether this CPU has the AVX-512 subsets the forms use (F, BW, VL, DQ); decided once.
 [[nodiscard]] bool CpuHasAvx512();
 
+/// Set by UsePortableFormsForTesting.
+extern std::atomic<bool> portable_forms_only;
+
 /// Whether the stages run their AVX-512 forms: compiled in, the CPU has them, and no test asked
-/// for the portable forms.
-[[nodiscard]] bool UseAvx512Forms();
+/// for the portable forms. Inline (called per row): a guard check and a relaxed load.
+[[nodiscard]] inline bool UseAvx512Forms() {
+  static const bool has = CpuHasAvx512();
+  return has && !portable_forms_only.load(std::memory_order_relaxed);
+}
 
 /// Tests only: with true, every stage with an AVX-512 form runs its portable loops even on an
 /// AVX-512 CPU, so a test can compare both forms on one machine. Process-wide; not meant to be

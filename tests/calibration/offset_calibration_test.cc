@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -331,7 +332,7 @@ TEST(ApplyCalibrationTest, DenseTableAgreesWithTheCatmullRomLoopItReplaced) {
 void EveryPixelIsEquationOneThenTheTable(const DistanceCorrection& g);
 
 TEST(ApplyCalibrationTest, EveryPixelIsEquationOneThenTheDenseTableBitForBit) {
-  // The per-pixel loop (vectorised, in an AVX2 and a baseline clone) must compute exactly
+  // The per-pixel loop (vectorised: AVX-512, AVX2 and baseline forms) must compute exactly
   // eq. 1 followed by l - DenseDistanceCorrection::Evaluate(l) wrapped into [0, L), in single
   // precision. 157 x 123 pixels leave a scalar tail after the vector loop. Two corrections: the
   // wiggle over all of [0, L), and one over 2-4 m only, whose ends hold (the index clamps).
@@ -339,9 +340,14 @@ TEST(ApplyCalibrationTest, EveryPixelIsEquationOneThenTheDenseTableBitForBit) {
   short_range.start_m = 2.0;
   short_range.step_m = 0.05;
   for (int k = 0; k <= 40; ++k) short_range.correction_m.push_back(0.01f * std::sin(0.7f * k));
-  for (const DistanceCorrection& g : {Wiggle(), short_range}) {
-    SCOPED_TRACE(g.start_m);
-    EveryPixelIsEquationOneThenTheTable(g);
+  // Both forms of the vector loop where the CPU has AVX-512 (16 and 8 pixels a step).
+  for (const bool portable : {false, true}) {
+    internal::UsePortableFormsForTesting(portable);
+    for (const DistanceCorrection& g : {Wiggle(), short_range}) {
+      SCOPED_TRACE(testing::Message() << "start " << g.start_m << ", portable " << portable);
+      EveryPixelIsEquationOneThenTheTable(g);
+    }
+    internal::UsePortableFormsForTesting(false);
   }
 }
 
