@@ -16,9 +16,10 @@
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
-// The hand-written AVX2 table kernel (Eq1IntervalsAvx2): x86-64 GCC or clang, and not under
-// AddressSanitizer (hot_loop.h sets TOFCAM_NO_CLONES there), so that the sanitizer build checks
-// the portable loop the kernel is tested against.
+// The hand-written table kernels (Eq1IntervalsAvx2, Eq1Intervals16): x86-64 GCC or clang, and
+// not under AddressSanitizer (hot_loop.h sets TOFCAM_NO_CLONES there), so that the sanitizer
+// build checks the portable loop the kernels are tested against; the same condition as
+// TOFCAM_AVX512_FORMS (src/core/avx512_forms.h), which guards the AVX-512 one.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(TOFCAM_NO_CLONES)
 #include <immintrin.h>
 #define TOFCAM_EQ1_AVX2 1
@@ -464,14 +465,14 @@ __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
 // dword gathers); the arithmetic, the flags and the deinterleave take half the instructions.
 // The same float operations in the same order, so the same values bit for bit
 // (tests/calibration/offset_calibration_test.cc runs both forms against eq. 1 and the table).
-#if !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
-__attribute__((target("avx512f,avx512bw,avx512vl,avx512dq"))) std::size_t Eq1Intervals16(
-    std::size_t n, float range, float bias, const float* __restrict o, PixelFlags* __restrict f,
-    const PixelFlags* __restrict extra_flags, float* __restrict d,
-    const float* __restrict intervals, float origin, float inv_step, float last, int last_segment) {
+#if defined(TOFCAM_AVX512_FORMS)
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
+TOFCAM_AVX512_TARGET std::size_t Eq1Intervals16(std::size_t n, float range, float bias,
+                                                const float* __restrict o, PixelFlags* __restrict f,
+                                                const PixelFlags* __restrict extra_flags,
+                                                float* __restrict d,
+                                                const float* __restrict intervals, float origin,
+                                                float inv_step, float last, int last_segment) {
   constexpr std::size_t kBlock = 256;
   alignas(64) float l_block[kBlock];
   alignas(64) float t_block[kBlock];
@@ -538,8 +539,7 @@ __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq"))) std::size_t Eq1Int
   return done;
 }
 #undef TOFCAM_FOUR_PAIRS
-#if !defined(__clang__)
-#pragma GCC diagnostic pop
+TOFCAM_AVX512_DIAGNOSTICS_END
 #endif
 
 bool HasAvx2() {
@@ -558,14 +558,10 @@ void CalibrateSpan(const CalibrationPlan& plan, std::size_t begin, std::size_t n
   } else {
 #if TOFCAM_EQ1_AVX2
     // The interval kernels also OR the calibration's flags into the pixels they do.
-    std::size_t (*intervals)(std::size_t, float, float, const float*, PixelFlags*,
-                             const PixelFlags*, float*, const float*, float, float, float, int) =
-        nullptr;
-    if (internal::UseAvx512Forms()) {
-      intervals = Eq1Intervals16;
-    } else if (HasAvx2()) {
-      intervals = Eq1IntervalsAvx2;
-    }
+    decltype(&Eq1IntervalsAvx2) intervals = HasAvx2() ? Eq1IntervalsAvx2 : nullptr;
+#if defined(TOFCAM_AVX512_FORMS)
+    if (internal::UseAvx512Forms()) intervals = Eq1Intervals16;
+#endif
     if (plan.table_intervals != nullptr && intervals != nullptr) {
       const PixelFlags* extra = plan.pixel_flags == nullptr ? nullptr : plan.pixel_flags + begin;
       done = intervals(n, plan.range_m, plan.bias_m, plan.offset_m + begin, f, extra, d,

@@ -13,6 +13,7 @@
 #include "../core/avx512_forms.h"
 #include "../filters/hot_loop.h"
 #include "../filters/simd.h"
+#include "false_color_internal.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -200,19 +201,12 @@ TOFCAM_HOT_LOOP void ColorRowShaded(int w, const ColorLaw& law, const float* __r
 // bit for bit: every clamp here has a finite operand where the mask keeps it, and there
 // std::max(x, 0) = (x < 0 ? 0 : x) = vmaxps(x, 0) and std::min(x, 1) = (1 < x ? 1 : x) =
 // vminps(x, 1) up to the sign of a zero, which the multiply by 255, the + 0.5 and the truncation
-// remove; NaN or infinite t (invisible pixels only) becomes 0 in vmaxps, and the visibility mask
-// zeroes those pixels' bytes. Separate multiplies and adds in the law's order (the file is built
-// with -ffp-contract=off). The last block's loads and its store are masked: nothing is read or
-// written past the row.
-#define TOFCAM_AVX512_INLINE \
-  __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq"), always_inline)) inline
-#define TOFCAM_AVX512_TARGET __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq")))
-// GCC 12's AVX-512 headers start some intrinsics from _mm512_undefined_*(), which
-// -Wmaybe-uninitialized reports (GCC bug 105593); nothing here reads an undefined value.
-#if !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
+// remove. t is never NaN on a visible pixel (finite d and a finite inv_range, which
+// FalseColorImageInto checks), ±inf there clamps to 0 or 1 in both forms, and a NaN t of an
+// invisible pixel becomes 0 in vmaxps while the visibility mask zeroes its bytes. Separate
+// multiplies and adds in the law's order (the file is built with -ffp-contract=off). The last
+// block's loads and its store are masked: nothing is read or written past the row.
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
 
 template <bool kShade>
 TOFCAM_AVX512_INLINE void ColorRow16Body(int w, const ColorLaw& law, const float* __restrict d,
@@ -221,7 +215,8 @@ TOFCAM_AVX512_INLINE void ColorRow16Body(int w, const ColorLaw& law, const float
   const __m512 near = _mm512_set1_ps(law.near), inv_range = _mm512_set1_ps(law.inv_range);
   const __m512 zero = _mm512_setzero_ps(), one = _mm512_set1_ps(1.0f);
   const __m512 three = _mm512_set1_ps(3.0f), c255 = _mm512_set1_ps(255.0f);
-  const __m512 half = _mm512_set1_ps(0.5f), inf = _mm512_set1_ps(kMaxF * 2.0f);
+  const __m512 half = _mm512_set1_ps(0.5f);
+  const __m512 inf = _mm512_set1_ps(std::numeric_limits<float>::infinity());
   const __m512 v_min = _mm512_set1_ps(law.v_min), span = _mm512_set1_ps(1.0f - law.v_min);
   const __m512 inv_ref = _mm512_set1_ps(law.inv_ref);
   const __m256i reject = _mm256_set1_epi16(static_cast<short>(kRejectMask));
@@ -281,9 +276,7 @@ TOFCAM_AVX512_TARGET void ColorRow16(int w, const ColorLaw& law, const float* __
   }
 }
 
-#if !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
+TOFCAM_AVX512_DIAGNOSTICS_END
 
 #endif
 
@@ -302,7 +295,40 @@ void ColorRow(int w, const ColorLaw& law, const float* d, const PixelFlags* f, c
   }
 }
 
+// The law's single-precision constants; throws Error(kInvalidArgument) when the far limit is not
+// finite and beyond near_m, or so close to it that 1 / (far - near) overflows a float (then
+// (d - near) * inv_range would be NaN at d = near).
+ColorLaw MakeLaw(const FalseColorOptions& o, double far) {
+  if (!(std::isfinite(far) && far > o.near_m)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: far limit " + std::to_string(far) +
+                    " m must exceed near_m = " + std::to_string(o.near_m) + " m");
+  }
+  const float inv_range = static_cast<float>(1.0 / (far - o.near_m));
+  if (!std::isfinite(inv_range)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "false colour: far limit " + std::to_string(far) +
+                    " m is too close to near_m = " + std::to_string(o.near_m) + " m");
+  }
+  return ColorLaw{static_cast<float>(o.near_m),
+                  inv_range,
+                  static_cast<float>(o.shading_min_value),
+                  static_cast<float>(1.0 / o.shading_reference_amplitude),
+                  o.out_of_range_black,
+                  o.amplitude_shading};
+}
+
 }  // namespace
+
+namespace color_internal {
+
+void ColorRowForTesting(int w, const FalseColorOptions& o, double far_m, const float* d,
+                        const PixelFlags* flags, const float* amplitude, std::uint8_t* rgb) {
+  o.Validate();
+  ColorRow(w, MakeLaw(o, far_m), d, flags, amplitude, rgb);
+}
+
+}  // namespace color_internal
 
 void FalseColorOptions::Validate() const {
   if (!(near_m >= 0.0 && near_m < 1e6)) {
@@ -358,18 +384,7 @@ void FalseColorImageInto(const Image<float>& distance_m, const Image<PixelFlags>
     throw Error(ErrorCode::kInvalidArgument,
                 "false colour: amplitude shading needs an amplitude image");
   }
-  const double far = o.far_m > 0.0 ? o.far_m : far_default_m;
-  if (!(std::isfinite(far) && far > o.near_m)) {
-    throw Error(ErrorCode::kInvalidArgument,
-                "false colour: far limit " + std::to_string(far) +
-                    " m must exceed near_m = " + std::to_string(o.near_m) + " m");
-  }
-  const ColorLaw law{static_cast<float>(o.near_m),
-                     static_cast<float>(1.0 / (far - o.near_m)),
-                     static_cast<float>(o.shading_min_value),
-                     static_cast<float>(1.0 / o.shading_reference_amplitude),
-                     o.out_of_range_black,
-                     o.amplitude_shading};
+  const ColorLaw law = MakeLaw(o, o.far_m > 0.0 ? o.far_m : far_default_m);
   if (!out.SameSize(w, h)) out = Image<Rgb8>(w, h);
   thread_local std::vector<float> zero_amplitude;
   thread_local std::vector<PixelFlags> zero_flags;
@@ -377,7 +392,7 @@ void FalseColorImageInto(const Image<float>& distance_m, const Image<PixelFlags>
   zero_flags.assign(static_cast<std::size_t>(w), PixelFlags());
   static_assert(sizeof(Rgb8) == 3);
   for (int row = 0; row < h; ++row) {
-    // The vector loop stores 24 bytes per 8 pixels within the row (no padding written).
+    // Every form writes exactly the row's 3 w bytes (no padding written).
     ColorRow(w, law, distance_m.Row(row).data(),
              flags.empty() ? zero_flags.data() : flags.Row(row).data(),
              amplitude.empty() ? zero_amplitude.data() : amplitude.Row(row).data(),

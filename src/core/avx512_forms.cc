@@ -2,7 +2,9 @@
 
 namespace tofcam::internal {
 
+namespace detail {
 std::atomic<bool> portable_forms_only{false};
+}  // namespace detail
 
 bool CpuHasAvx512() {
 #if defined(TOFCAM_AVX512_FORMS)
@@ -18,7 +20,7 @@ bool CpuHasAvx512() {
 }
 
 void UsePortableFormsForTesting(bool portable) {
-  portable_forms_only.store(portable, std::memory_order_relaxed);
+  detail::portable_forms_only.store(portable, std::memory_order_relaxed);
 }
 
 }  // namespace tofcam::internal

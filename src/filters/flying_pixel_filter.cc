@@ -12,13 +12,12 @@
 #include "../core/avx512_forms.h"
 #include "filter_internal.h"
 #include "simd.h"
+#include "tofcam/core/error.h"
 
 // The AVX-512 forms (row preparation, two-row decision): see src/core/avx512_forms.h.
 #if defined(TOFCAM_AVX512_FORMS)
-#define TOFCAM_FLYING_PIXEL_AVX512 1
 #include <immintrin.h>
 #endif
-#include "tofcam/core/error.h"
 
 namespace tofcam {
 namespace filters_internal {
@@ -163,7 +162,7 @@ TOFCAM_HOT_LOOP void PrepareRowShifted(int w, bool sums, const float* __restrict
 #undef TOFCAM_RIGHT
 }
 
-#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+#if defined(TOFCAM_AVX512_FORMS)
 // PrepareRowShifted for AVX-512 CPUs, sixteen pixels at a time, written with intrinsics: GCC 12
 // compiles 16-lane generic vectors of a target_clones function for the baseline ISA first and
 // turns their compares into scalar code. The same values bit for bit as PrepareRowShifted:
@@ -171,15 +170,7 @@ TOFCAM_HOT_LOOP void PrepareRowShifted(int w, bool sums, const float* __restrict
 // zeros of both signs), and separate multiplies and adds in the same order (the file is built
 // with -ffp-contract=off). The last block's loads are masked (no read past w) and its lanes
 // beyond w are neutral.
-#define TOFCAM_AVX512_TARGET __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq")))
-#define TOFCAM_AVX512_INLINE \
-  __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq"), always_inline)) inline
-// GCC 12's AVX-512 headers start some intrinsics from _mm512_undefined_*(), which
-// -Wmaybe-uninitialized reports (GCC bug 105593); nothing here reads an undefined value.
-#if !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
 
 struct Block16 {
   __m512 w, a, lo, hi;
@@ -251,12 +242,10 @@ TOFCAM_AVX512_TARGET void PrepareRowShifted16(
   }
 }
 
-#if !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
+TOFCAM_AVX512_DIAGNOSTICS_END
 #endif
 
-#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+#if defined(TOFCAM_AVX512_FORMS)
 using internal::UseAvx512Forms;
 #endif
 
@@ -266,7 +255,7 @@ void PrepareRowAnyCpu(int w, bool sums, const float* d, const float* a, const Pi
                       const float* next_d, const float* next_a, const PixelFlags* next_pf,
                       float* cw, float* ca, float* lo, float* hi, float* n, float* sum,
                       float* sum2) {
-#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+#if defined(TOFCAM_AVX512_FORMS)
   if (UseAvx512Forms()) {
     PrepareRowShifted16(w, sums, d, a, pf, next_d, next_a, next_pf, cw, ca, lo, hi, n, sum, sum2);
     return;
@@ -412,11 +401,8 @@ struct RowPair {
   PixelFlags *fm, *fv, *em, *ev;  // em, ev null: no echo
 };
 
-#if defined(TOFCAM_FLYING_PIXEL_AVX512)
-#if !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
+#if defined(TOFCAM_AVX512_FORMS)
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
 // DistancePass on 16 lanes as a mask (the same operations: std::min(x, y) = vminps(y, x),
 // std::max(x, y) = vmaxps(y, x)).
 TOFCAM_AVX512_INLINE __mmask16 DistancePass16(__mmask16 in, __m512 lu, __m512 lm, __m512 lv,
@@ -490,15 +476,13 @@ TOFCAM_AVX512_TARGET std::uint32_t DecideTwoRows16(int w, const Thresholds& t, c
   }
   return count;
 }
-#if !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
+TOFCAM_AVX512_DIAGNOSTICS_END
 #endif
 
 // DecideTwoRows16 where the CPU has AVX-512 (unless a test asked for the portable form), else
 // DecideTwoRows.
 std::uint32_t DecideTwoRowsAnyCpu(int w, const Thresholds& t, const RowPair& p) {
-#if defined(TOFCAM_FLYING_PIXEL_AVX512)
+#if defined(TOFCAM_AVX512_FORMS)
   if (UseAvx512Forms()) return DecideTwoRows16(w, t, p);
 #endif
   return DecideTwoRows(w, t, p.lu, p.lm, p.lv, p.lx, p.hu, p.hm, p.hv, p.hx, p.dm, p.dv, p.cm, p.cv,

@@ -2,7 +2,8 @@
 // TOFCAM_HOT_LOOP: compile a hot loop twice, for AVX2 and for the baseline, and pick one at load
 // time (GCC / clang function multiversioning through an ELF ifunc), so one binary runs
 // everywhere and uses 8-wide vectors where the CPU has them. Off under AddressSanitizer and
-// outside x86-64 Linux. Shared by src/filters, src/cloud and src/color.
+// outside x86-64 Linux. Shared by the library's hot loops (src/filters, src/cloud, src/color,
+// src/calibration, src/pipeline, src/pan, ...) and by src/core/avx512_forms.h.
 
 #if defined(__has_feature)
 #if __has_feature(address_sanitizer)

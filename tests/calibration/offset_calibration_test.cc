@@ -342,12 +342,11 @@ TEST(ApplyCalibrationTest, EveryPixelIsEquationOneThenTheDenseTableBitForBit) {
   for (int k = 0; k <= 40; ++k) short_range.correction_m.push_back(0.01f * std::sin(0.7f * k));
   // Both forms of the vector loop where the CPU has AVX-512 (16 and 8 pixels a step).
   for (const bool portable : {false, true}) {
-    internal::UsePortableFormsForTesting(portable);
+    const internal::PortableFormsForTesting forms(portable);
     for (const DistanceCorrection& g : {Wiggle(), short_range}) {
       SCOPED_TRACE(testing::Message() << "start " << g.start_m << ", portable " << portable);
       EveryPixelIsEquationOneThenTheTable(g);
     }
-    internal::UsePortableFormsForTesting(false);
   }
 }
 

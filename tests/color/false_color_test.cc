@@ -8,7 +8,8 @@
 #include <limits>
 #include <random>
 
-#include "core/avx512_forms.h"
+#include "color/false_color_internal.h"  // internal: one row of the law (src/color)
+#include "core/avx512_forms.h"           // internal: the portable / AVX-512 switch (src/core)
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
 
@@ -250,9 +251,11 @@ TEST(FalseColorTest, Avx512AndPortableFormsGiveTheSameBytes) {
         o.far_m = 6.5;
         o.amplitude_shading = shade;
         o.out_of_range_black = black;
-        internal::UsePortableFormsForTesting(true);
-        const Image<Rgb8> portable = FalseColor(f, o);
-        internal::UsePortableFormsForTesting(false);
+        Image<Rgb8> portable;
+        {
+          const internal::PortableFormsForTesting forms(true);
+          portable = FalseColor(f, o);
+        }
         const Image<Rgb8> fast = FalseColor(f, o);
         for (std::size_t i = 0; i < fast.size(); ++i) {
           ASSERT_EQ(fast[i], portable[i]) << "pixel " << i;
@@ -263,6 +266,38 @@ TEST(FalseColorTest, Avx512AndPortableFormsGiveTheSameBytes) {
   }
   EXPECT_GT(lit, 1000);  // the comparison is not between black images
   if (!avx512) GTEST_SKIP() << "no AVX-512 on this CPU: only the portable form was compared";
+}
+
+TEST(FalseColorTest, EachFormWritesExactlyItsRowsBytes) {
+  // One row of every width from 1 to 40 into a buffer with guard bytes after its 3 w bytes: both
+  // forms fill the row with the same bytes and leave the guard alone (a store mask one pixel too
+  // wide would write into it; inside an image it would land in the next row and be overwritten).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0.0f, 8.0f);
+  constexpr std::uint8_t kGuard = 0xA5;
+  for (int w = 1; w <= 40; ++w) {
+    std::vector<float> d(static_cast<std::size_t>(w)), a(d.size(), 5000.0f);
+    std::vector<PixelFlags> flags(d.size());
+    for (float& x : d) x = u(rng);
+    for (const bool shade : {false, true}) {
+      SCOPED_TRACE(testing::Message() << "width " << w << ", shading " << shade);
+      FalseColorOptions o;
+      o.amplitude_shading = shade;
+      std::vector<std::vector<std::uint8_t>> rows;
+      for (const bool portable : {true, false}) {
+        const internal::PortableFormsForTesting forms(portable);
+        std::vector<std::uint8_t> rgb(3 * d.size() + 64, kGuard);
+        color_internal::ColorRowForTesting(w, o, 7.5, d.data(), flags.data(), a.data(), rgb.data());
+        for (std::size_t i = 3 * d.size(); i < rgb.size(); ++i) {
+          ASSERT_EQ(rgb[i], kGuard) << "byte " << i << " past the row, portable " << portable;
+        }
+        rows.push_back(rgb);
+      }
+      EXPECT_EQ(rows[0], rows[1]);
+      // The row itself was written: no colour of the law has r = g = b = 0xA5.
+      EXPECT_FALSE(rows[1][0] == kGuard && rows[1][1] == kGuard && rows[1][2] == kGuard);
+    }
+  }
 }
 
 TEST(FalseColorTest, ErrorsAreReported) {
@@ -285,6 +320,9 @@ TEST(FalseColorTest, ErrorsAreReported) {
     EXPECT_NE(std::string(e.what()).find("amplitude"), std::string::npos);
   }
   EXPECT_THROW((void)FalseColor(MetricFrame{}, {}), Error);
+  o = {};
+  o.far_m = 1e-39;  // 1 / (far - near) overflows a float: t would be NaN at d = 0
+  EXPECT_THROW((void)FalseColor(Frame({0.0f}), o), Error);
 }
 
 TEST(LegendTest, AppendsBarTicksAndKeepsTheImage) {

@@ -289,7 +289,7 @@ TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
     }
     // The filter in one form: its flags, after checking them against the rule and the echo.
     auto run = [&](bool portable) {
-      internal::UsePortableFormsForTesting(portable);
+      const internal::PortableFormsForTesting forms(portable);
       ExpectMatchesRule(f, FlyingPixelOptions{});
       Image<PixelFlags> out(w, h), echo(w, h);
       filters_internal::FlyingPixelInto(f, f.flags, FlyingPixelOptions{}, out, &echo);
@@ -297,7 +297,6 @@ TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
         EXPECT_EQ(echo[i].bits(), out[i].bits() & static_cast<std::uint16_t>(Flag::kFlyingPixel))
             << i;
       }
-      internal::UsePortableFormsForTesting(false);
       return out;
     };
     const Image<PixelFlags> portable = run(true);

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <map>
 #include <tuple>
+#include <utility>
+#include <vector>
 
 #include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "test_scene.h"
@@ -305,9 +307,11 @@ TEST(WeingartenCellFilterTest, EveryFrameLengthCountsEachPointOnce) {
 
 TEST(WeingartenCellFilterTest, Avx512AndPortableFormsFlagTheSamePixels) {
   // The scene frame with outliers (sparse cells among dense ones) cut to every width from 1 to 40
-  // (every tail of a 16-pixel block) plus the full frame, some pixels rejected: on an AVX-512 CPU
-  // the default form flags with a gather, the portable one with table reads; both must set the
-  // same bits, and keep every bit the frame's flags had.
+  // plus the full frame, and, at the odd width 17, to 16 heights in a row, so that the frame's
+  // pixel count (the flagging runs over the whole frame) leaves every remainder mod 16 for the
+  // portable tail; some pixels rejected. On an AVX-512 CPU the default form flags with a gather,
+  // the portable one with table reads; both must set the same bits, and keep every bit the frame's
+  // flags had.
   test::Scene s = test::MakeScene();
   for (int i = 0; i < 300; ++i) {
     const int r = (i * 37) % s.frame.height(), c = (i * 91) % s.frame.width();
@@ -319,18 +323,20 @@ TEST(WeingartenCellFilterTest, Avx512AndPortableFormsFlagTheSamePixels) {
   WeingartenCellOptions o;
   o.voxel_size_m = 0.1;
   o.min_points = 5;
-  std::vector<int> widths;
-  for (int w = 1; w <= 40; ++w) widths.push_back(w);
-  widths.push_back(s.frame.width());
+  std::vector<std::pair<int, int>> sizes;
+  for (int w = 1; w <= 40; ++w) sizes.emplace_back(w, s.frame.height());
+  for (int h = s.frame.height() - 16; h < s.frame.height(); ++h) sizes.emplace_back(17, h);
+  sizes.emplace_back(s.frame.width(), s.frame.height());
   int flagged = 0;
-  for (const int w : widths) {
-    SCOPED_TRACE(testing::Message() << "width " << w);
+  std::vector<bool> remainder_seen(16);
+  for (const auto& [w, h] : sizes) {
+    remainder_seen[static_cast<std::size_t>(w * h % 16)] = true;
+    SCOPED_TRACE(testing::Message() << w << " x " << h);
     MetricFrame f;
-    f.radial_distance_m = Image<float>(w, s.frame.height());
-    f.flags = Image<PixelFlags>(w, s.frame.height());
-    RayTable rays{Image<float>(w, s.frame.height()), Image<float>(w, s.frame.height()),
-                  Image<float>(w, s.frame.height())};
-    for (int r = 0; r < s.frame.height(); ++r) {
+    f.radial_distance_m = Image<float>(w, h);
+    f.flags = Image<PixelFlags>(w, h);
+    RayTable rays{Image<float>(w, h), Image<float>(w, h), Image<float>(w, h)};
+    for (int r = 0; r < h; ++r) {
       for (int c = 0; c < w; ++c) {
         f.radial_distance_m(r, c) = s.frame.radial_distance_m(r, c);
         f.flags(r, c) = s.frame.flags(r, c);
@@ -339,9 +345,11 @@ TEST(WeingartenCellFilterTest, Avx512AndPortableFormsFlagTheSamePixels) {
         rays.z(r, c) = s.rays.z(r, c);
       }
     }
-    internal::UsePortableFormsForTesting(true);
-    const Image<PixelFlags> portable = WeingartenCellFilter(f, rays, o);
-    internal::UsePortableFormsForTesting(false);
+    Image<PixelFlags> portable;
+    {
+      const internal::PortableFormsForTesting forms(true);
+      portable = WeingartenCellFilter(f, rays, o);
+    }
     const Image<PixelFlags> fast = WeingartenCellFilter(f, rays, o);
     for (std::size_t i = 0; i < fast.size(); ++i) {
       ASSERT_EQ(fast[i].bits(), portable[i].bits()) << "pixel " << i;
@@ -349,6 +357,7 @@ TEST(WeingartenCellFilterTest, Avx512AndPortableFormsFlagTheSamePixels) {
     }
   }
   EXPECT_GT(flagged, 1000);  // the comparison is not between unflagged images
+  EXPECT_EQ(std::count(remainder_seen.begin(), remainder_seen.end(), true), 16);
   if (!internal::CpuHasAvx512()) {
     GTEST_SKIP() << "no AVX-512 on this CPU: only the portable form was compared";
   }
