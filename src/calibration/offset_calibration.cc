@@ -372,6 +372,15 @@ TOFCAM_HOT_LOOP void Eq1Table(std::size_t n, float range, float bias, const floa
 }
 
 #if TOFCAM_EQ1_AVX2
+// Pair j of the interval table, (g_j, g_{j+1} - g_j), as one 64-bit integer; memcpy, not a cast,
+// keeps the read well defined. Inlined into both interval kernels (a baseline function inlines
+// into a function of a wider target).
+[[gnu::always_inline]] inline long long IntervalPair(const float* intervals, std::int32_t j) {
+  long long v;
+  std::memcpy(&v, intervals + 2 * static_cast<std::ptrdiff_t>(j), sizeof v);
+  return v;
+}
+
 // Eq1Table with the interval table (g_j, g_{j+1} - g_j): the two values a pixel needs are one
 // 64-bit element. Written with intrinsics because GCC does not turn the paired reads into 64-bit
 // reads; the same float operations in the same order as Eq1Table, so the same values bit for bit
@@ -403,12 +412,6 @@ __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
   const __m256 vlast = _mm256_set1_ps(last), zero = _mm256_setzero_ps();
   const __m256i vseg = _mm256_set1_epi32(last_segment);
   const __m128i invalid = _mm_set1_epi16(static_cast<short>(Flag::kInvalid));
-  // Pair j (two floats) as one 64-bit integer; memcpy, not a cast, keeps the read well defined.
-  const auto pair = [intervals](std::int32_t j) {
-    long long v;
-    std::memcpy(&v, intervals + 2 * static_cast<std::ptrdiff_t>(j), sizeof v);
-    return v;
-  };
   const std::size_t done = n / 8 * 8;
   for (std::size_t begin = 0; begin < done; begin += kBlock) {
     const std::size_t len = std::min(kBlock, done - begin);
@@ -432,10 +435,14 @@ __attribute__((target("avx2"))) std::size_t Eq1IntervalsAvx2(
     for (std::size_t i = 0; i < len; i += 8) {
       // The (g0, dg) pairs of pixels 0-7, deinterleaved into g0 and dg.
       const std::int32_t* k = k_block + i;
-      const __m128i p01 = _mm_set_epi64x(pair(k[1]), pair(k[0]));
-      const __m128i p23 = _mm_set_epi64x(pair(k[3]), pair(k[2]));
-      const __m128i p45 = _mm_set_epi64x(pair(k[5]), pair(k[4]));
-      const __m128i p67 = _mm_set_epi64x(pair(k[7]), pair(k[6]));
+      const __m128i p01 =
+          _mm_set_epi64x(IntervalPair(intervals, k[1]), IntervalPair(intervals, k[0]));
+      const __m128i p23 =
+          _mm_set_epi64x(IntervalPair(intervals, k[3]), IntervalPair(intervals, k[2]));
+      const __m128i p45 =
+          _mm_set_epi64x(IntervalPair(intervals, k[5]), IntervalPair(intervals, k[4]));
+      const __m128i p67 =
+          _mm_set_epi64x(IntervalPair(intervals, k[7]), IntervalPair(intervals, k[6]));
       // Pixels 0, 1, 4, 5 and 2, 3, 6, 7, so that the in-lane shuffles give pixel order.
       const __m256 lo = _mm256_castsi256_ps(_mm256_set_m128i(p45, p01));
       const __m256 hi = _mm256_castsi256_ps(_mm256_set_m128i(p67, p23));
@@ -486,15 +493,11 @@ TOFCAM_AVX512_TARGET std::size_t Eq1Intervals16(std::size_t n, float range, floa
   const __m512i evens =
       _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
   const __m512i odds = _mm512_add_epi32(evens, _mm512_set1_epi32(1));
-  const auto pair = [intervals](std::int32_t j) {
-    long long v;
-    std::memcpy(&v, intervals + 2 * static_cast<std::ptrdiff_t>(j), sizeof v);
-    return v;
-  };
   // Pairs k[0..3] as one 256-bit register, in order (a macro: a lambda would not inherit the
   // function's target).
-#define TOFCAM_FOUR_PAIRS(k) \
-  _mm256_set_epi64x(pair((k)[3]), pair((k)[2]), pair((k)[1]), pair((k)[0]))
+#define TOFCAM_FOUR_PAIRS(k)                                                          \
+  _mm256_set_epi64x(IntervalPair(intervals, (k)[3]), IntervalPair(intervals, (k)[2]), \
+                    IntervalPair(intervals, (k)[1]), IntervalPair(intervals, (k)[0]))
   const std::size_t done = n / 16 * 16;
   for (std::size_t begin = 0; begin < done; begin += kBlock) {
     const std::size_t len = std::min(kBlock, done - begin);
