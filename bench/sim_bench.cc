@@ -1,4 +1,5 @@
-// Simulator throughput: frames per second of SimulatedCamera::Grab() (items_per_second).
+// Simulator throughput: frames per second of SimulatedCamera::Grab() (items_per_second). The
+// second argument, where there is one, switches the planar shortcut on (1) or off (0).
 #include <benchmark/benchmark.h>
 
 #include "sim_scenes.h"
@@ -15,9 +16,11 @@ using tofcam::sim::Scene;
 using tofcam::sim::SimulatedCamera;
 using tofcam::sim::SimulatorOptions;
 
-void Run(benchmark::State& state, Scene scene, const CameraModel& model, int threads) {
+void Run(benchmark::State& state, Scene scene, const CameraModel& model, int threads,
+         bool shortcut = false) {
   SimulatorOptions o;
   o.threads = threads;
+  o.planar_shortcut = shortcut;
   o.integration_time_register = 40;
   SimulatedCamera cam(std::move(scene), model, o);
   for (auto _ : state) {
@@ -28,30 +31,44 @@ void Run(benchmark::State& state, Scene scene, const CameraModel& model, int thr
 }
 
 void BM_PavilionMovingCamera(benchmark::State& state) {
-  Run(state, MovingPavilion(), ResolveCameraModel("sr2"), static_cast<int>(state.range(0)));
+  Run(state, MovingPavilion(), ResolveCameraModel("sr2"), static_cast<int>(state.range(0)),
+      state.range(1) != 0);
 }
-BENCHMARK(BM_PavilionMovingCamera)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PavilionMovingCamera)
+    ->ArgsProduct({{1, 2}, {0, 1}})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_PavilionFastPan(benchmark::State& state) {
-  Run(state, PanningPavilion(), ResolveCameraModel("sr2"), static_cast<int>(state.range(0)));
+  Run(state, PanningPavilion(), ResolveCameraModel("sr2"), static_cast<int>(state.range(0)),
+      state.range(1) != 0);
 }
-BENCHMARK(BM_PavilionFastPan)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PavilionFastPan)
+    ->ArgsProduct({{1, 2}, {0, 1}})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_PavilionStaticCamera(benchmark::State& state) {
   Run(state, LoadBuiltinScene("pavilion"), ResolveCameraModel("sr2"),
-      static_cast<int>(state.range(0)));
+      static_cast<int>(state.range(0)), state.range(1) != 0);
 }
-BENCHMARK(BM_PavilionStaticCamera)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PavilionStaticCamera)
+    ->ArgsProduct({{1, 2}, {0, 1}})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_Generic640MovingCamera(benchmark::State& state) {
   Run(state, MovingPavilion(), ResolveCameraModel("generic640x480"),
-      static_cast<int>(state.range(0)));
+      static_cast<int>(state.range(0)), state.range(1) != 0);
 }
-BENCHMARK(BM_Generic640MovingCamera)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Generic640MovingCamera)
+    ->ArgsProduct({{1, 2}, {0, 1}})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_DemoSequence(benchmark::State& state) {
-  Run(state, LoadBuiltinScene("demo"), ResolveCameraModel("sr2"), 1);
+  Run(state, LoadBuiltinScene("demo"), ResolveCameraModel("sr2"), 1, state.range(0) != 0);
 }
-BENCHMARK(BM_DemoSequence)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_DemoSequence)->Arg(0)->Arg(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 }  // namespace

@@ -1,6 +1,7 @@
 // Fixed-work driver for instruction-count profiling of SimulatedCamera::Grab(), e.g.
 //   valgrind --tool=callgrind --toggle-collect='tofcam::sim::SimulatedCamera::Grab()'
 //     build/bench/sim_profile moving 20 1   (one command line)
+// A fourth argument `shortcut` switches the planar shortcut on.
 // Cases: moving | pan | static | generic640 | demo (the scenes of sim_bench.cc). The first frame
 // is grabbed before the measured ones so one-time work (Embree BVH build) can be excluded by
 // comparing runs with different frame counts. Instruction counts do not depend on machine load,
@@ -16,13 +17,16 @@
 int main(int argc, char** argv) {
   using tofcam::sim::ResolveCameraModel;
   if (argc < 3) {
-    std::fprintf(stderr, "usage: sim_profile moving|pan|static|generic640|demo FRAMES [THREADS]\n");
+    std::fprintf(
+        stderr,
+        "usage: sim_profile moving|pan|static|generic640|demo FRAMES [THREADS [shortcut]]\n");
     return 2;
   }
   const std::string which = argv[1];
   const int frames = std::atoi(argv[2]);
   tofcam::sim::SimulatorOptions o;
   o.threads = argc > 3 ? std::atoi(argv[3]) : 1;
+  o.planar_shortcut = argc > 4 && std::string(argv[4]) == "shortcut";
   o.integration_time_register = 40;
   tofcam::sim::Scene scene;
   std::string model = "sr2";

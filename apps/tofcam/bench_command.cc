@@ -588,10 +588,11 @@ struct SimRow {
 // Frames/s of Grab(), median of 5 batches of at least min_time_s / 5 and 3 frames each, with the
 // slowest and fastest batch.
 SimRow SimulatorFps(std::string name, sim::Scene scene, const sim::CameraModel& model, int threads,
-                    double min_time_s) {
+                    double min_time_s, bool planar_shortcut = false) {
   sim::SimulatorOptions so;
   so.seed = 7;
   so.threads = threads;
+  so.planar_shortcut = planar_shortcut;
   so.integration_time_register = 40;
   sim::SimulatedCamera cam(std::move(scene), model, so);
   for (int i = 0; i < 2; ++i) (void)cam.Grab();
@@ -869,6 +870,13 @@ void RunBench(const BenchOptions& o) {
       sim_rows.push_back(SimulatorFps("generic 640x480 model, pavilion, moving camera",
                                       bench::MovingPavilion(),
                                       sim::ResolveCameraModel("generic640x480"), th, t));
+      // The same two moving cameras with the planar shortcut (SimulatorOptions).
+      sim_rows.push_back(SimulatorFps("SR-2 pavilion, moving camera, planar shortcut",
+                                      bench::MovingPavilion(), sim::ResolveCameraModel("sr2"), th,
+                                      t, true));
+      sim_rows.push_back(SimulatorFps("generic 640x480 model, moving camera, planar shortcut",
+                                      bench::MovingPavilion(),
+                                      sim::ResolveCameraModel("generic640x480"), th, t, true));
     }
   }
 

@@ -33,6 +33,7 @@ struct SimulateOptions {
   bool ideal = false;
   bool interreflection = false;
   int interreflection_samples = 4;
+  bool planar_shortcut = false;
 };
 
 void WriteFloatImage(const std::filesystem::path& path, const Image<float>& image) {
@@ -84,6 +85,7 @@ void RunSimulate(const SimulateOptions& o) {
   options.power_on_time_s = o.power_on_time_s;
   options.interreflection = o.interreflection;
   options.interreflection_samples = o.interreflection_samples;
+  options.planar_shortcut = o.planar_shortcut;
   const sim::CameraModel model = sim::ResolveCameraModel(o.camera_model);
   sim::SimulatedCamera camera(sim::ResolveScene(scene_name, overrides), model, options);
   if (o.integration_time_us != 0) {
@@ -172,6 +174,9 @@ void SetupSimulateCommand(CLI::App& app) {
   sub->add_option("--interreflection-samples", o->interreflection_samples,
                   "Hemisphere samples per evaluated point (1..256)")
       ->capture_default_str();
+  sub->add_flag("--planar-shortcut", o->planar_shortcut,
+                "Cast subsample rays in closed form inside single triangles (about 1.3x faster; "
+                "frames equal to the exact ones up to rounding, docs/simulator.md)");
   sub->callback([o] { RunSimulate(*o); });
 }
 

@@ -35,10 +35,10 @@ struct Packet<16> {
   }
 };
 
-// Intersects rays [0, n) of `b`, all from `org`, in packets of K consecutive rays.
+// Intersects rays [first, first + n) of `b`, all from `org`, in packets of K consecutive rays.
 template <int K>
-void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
-            RayBatch& b) {
+void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t first,
+            std::size_t n, RayBatch& b) {
   typename Packet<K>::RayHit rh{};
   alignas(64) int valid[K];
   for (int l = 0; l < K; ++l) {
@@ -48,37 +48,57 @@ void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
     rh.ray.mask[l] = 0xFFFFFFFFu;
     rh.ray.id[l] = static_cast<unsigned>(l);
   }
-  for (std::size_t q = 0; q < n; q += K) {
-    const std::size_t m = std::min<std::size_t>(K, n - q);
-    for (int l = 0; l < K; ++l) {
-      const bool on = static_cast<std::size_t>(l) < m;
-      const std::size_t i = on ? q + l : q;  // inactive lanes repeat a valid ray
-      valid[l] = on ? -1 : 0;
-      rh.ray.dir_x[l] = b.dx[i];
-      rh.ray.dir_y[l] = b.dy[i];
-      rh.ray.dir_z[l] = b.dz[i];
-      rh.ray.tfar[l] = kInf;  // stays inf on a miss
-      rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-      rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
-    }
+  const std::size_t end = first + n, full = first + (n - n % K);
+  for (int l = 0; l < K; ++l) valid[l] = -1;
+  // Full packets: fixed-size copies, which compile to a few vector moves.
+  for (std::size_t q = first; q < full; q += K) {
+    std::copy_n(&b.dx[q], K, rh.ray.dir_x);
+    std::copy_n(&b.dy[q], K, rh.ray.dir_y);
+    std::copy_n(&b.dz[q], K, rh.ray.dir_z);
+    std::fill_n(rh.ray.tfar, K, kInf);  // stays inf on a miss
+    std::fill_n(rh.hit.geomID, K, RTC_INVALID_GEOMETRY_ID);
+    std::fill_n(rh.hit.instID[0], K, RTC_INVALID_GEOMETRY_ID);
     Packet<K>::Intersect(valid, scene, ctx, &rh);
-    std::copy_n(rh.ray.tfar, m, &b.t[q]);
-    std::copy_n(rh.hit.geomID, m, &b.geom[q]);
-    std::copy_n(rh.hit.Ng_x, m, &b.nx[q]);
-    std::copy_n(rh.hit.Ng_y, m, &b.ny[q]);
-    std::copy_n(rh.hit.Ng_z, m, &b.nz[q]);
+    std::copy_n(rh.ray.tfar, K, &b.t[q]);
+    std::copy_n(rh.hit.geomID, K, &b.geom[q]);
+    std::copy_n(rh.hit.primID, K, &b.prim[q]);
+    std::copy_n(rh.hit.Ng_x, K, &b.nx[q]);
+    std::copy_n(rh.hit.Ng_y, K, &b.ny[q]);
+    std::copy_n(rh.hit.Ng_z, K, &b.nz[q]);
   }
+  if (full == end) return;
+  // The partial packet: inactive lanes repeat a valid ray.
+  const std::size_t q = full, m = end - full;
+  for (int l = 0; l < K; ++l) {
+    const bool on = static_cast<std::size_t>(l) < m;
+    const std::size_t i = on ? q + l : q;
+    valid[l] = on ? -1 : 0;
+    rh.ray.dir_x[l] = b.dx[i];
+    rh.ray.dir_y[l] = b.dy[i];
+    rh.ray.dir_z[l] = b.dz[i];
+    rh.ray.tfar[l] = kInf;
+    rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
+  }
+  Packet<K>::Intersect(valid, scene, ctx, &rh);
+  std::copy_n(rh.ray.tfar, m, &b.t[q]);
+  std::copy_n(rh.hit.geomID, m, &b.geom[q]);
+  std::copy_n(rh.hit.primID, m, &b.prim[q]);
+  std::copy_n(rh.hit.Ng_x, m, &b.nx[q]);
+  std::copy_n(rh.hit.Ng_y, m, &b.ny[q]);
+  std::copy_n(rh.hit.Ng_z, m, &b.nz[q]);
 }
 
 // The same one ray at a time (CPUs without native packets).
-void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
-            RayBatch& b) {
-  for (std::size_t i = 0; i < n; ++i) {
+void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t first,
+            std::size_t n, RayBatch& b) {
+  for (std::size_t i = first; i < first + n; ++i) {
     RTCRayHit rh;
     SetRay(rh, org, Eigen::Vector3f(b.dx[i], b.dy[i], b.dz[i]), 0.f);
     rtcIntersect1(scene, ctx, &rh);
     b.t[i] = rh.ray.tfar;
     b.geom[i] = rh.hit.geomID;
+    b.prim[i] = rh.hit.primID;
     b.nx[i] = rh.hit.Ng_x;
     b.ny[i] = rh.hit.Ng_y;
     b.nz[i] = rh.hit.Ng_z;
@@ -187,6 +207,11 @@ void SceneGeometry::PlaceObjects(double time_s) {
   if (changed) rtcCommitScene(rtc_scene_);
 }
 
+const float* SceneGeometry::WorldVertices(std::size_t i) const {
+  return static_cast<const float*>(rtcGetGeometryBufferData(
+      rtcGetGeometry(rtc_scene_, geometry_ids_[i]), RTC_BUFFER_TYPE_VERTEX, 0));
+}
+
 float SceneGeometry::Cast(const Eigen::Vector3f& org, const Eigen::Vector3f& dir, float tnear,
                           RTCIntersectContext& ctx, Eigen::Vector3f& normal, int& object) const {
   RTCRayHit rh;
@@ -199,19 +224,19 @@ float SceneGeometry::Cast(const Eigen::Vector3f& org, const Eigen::Vector3f& dir
 }
 
 void SceneGeometry::Trace(RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
-                          RayBatch& b) const {
+                          RayBatch& b, std::size_t first) const {
   switch (packet_width_) {
     case 16:
-      TraceK<16>(rtc_scene_, ctx, org, n, b);
+      TraceK<16>(rtc_scene_, ctx, org, first, n, b);
       break;
     case 8:
-      TraceK<8>(rtc_scene_, ctx, org, n, b);
+      TraceK<8>(rtc_scene_, ctx, org, first, n, b);
       break;
     case 4:
-      TraceK<4>(rtc_scene_, ctx, org, n, b);
+      TraceK<4>(rtc_scene_, ctx, org, first, n, b);
       break;
     default:
-      Trace1(rtc_scene_, ctx, org, n, b);
+      Trace1(rtc_scene_, ctx, org, first, n, b);
   }
 }
 

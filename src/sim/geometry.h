@@ -20,10 +20,12 @@ struct RayBatch {
   std::vector<float> dx, dy, dz;  ///< world directions (unit)
   std::vector<float> t;           ///< hit distance, m; inf on a miss
   std::vector<unsigned> geom;     ///< geometry id (= object index) or RTC_INVALID_GEOMETRY_ID
+  std::vector<unsigned> prim;     ///< triangle index within the geometry; undefined on a miss
   std::vector<float> nx, ny, nz;  ///< geometric normal, not normalised; undefined on a miss
   void Resize(std::size_t n) {
     for (auto* v : {&dx, &dy, &dz, &t, &nx, &ny, &nz}) v->resize(n);
     geom.resize(n);
+    prim.resize(n);
   }
 };
 
@@ -69,14 +71,17 @@ class SceneGeometry {
   /// Rays per packet the CPU runs natively: 16, 8, 4 or 1.
   [[nodiscard]] int PacketWidth() const noexcept { return packet_width_; }
   [[nodiscard]] RTCScene Handle() const noexcept { return rtc_scene_; }
+  /// World coordinates (x, y, z per vertex, m) of object i's vertices at its current pose, in the
+  /// order of SceneObject::vertices.
+  [[nodiscard]] const float* WorldVertices(std::size_t i) const;
 
   /// Casts one ray from `org` along unit `dir` beyond `tnear` (m); returns the hit distance (inf
   /// on a miss) and sets the unit geometric normal and the object index on a hit.
   float Cast(const Eigen::Vector3f& org, const Eigen::Vector3f& dir, float tnear,
              RTCIntersectContext& ctx, Eigen::Vector3f& normal, int& object) const;
-  /// Intersects the first n rays of `b` (all from org) in the CPU's native packet width.
-  void Trace(RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
-             RayBatch& b) const;
+  /// Intersects rays [first, first + n) of `b` (all from org) in the CPU's native packet width.
+  void Trace(RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n, RayBatch& b,
+             std::size_t first = 0) const;
 
  private:
   static void WriteVertices(RTCGeometry g, const SceneObject& o, const Eigen::Isometry3d& pose);

@@ -19,6 +19,7 @@
 #include "radiometry.h"
 #include "rng.h"
 #include "sensor.h"
+#include "subsample_shortcut.h"
 #include "timing.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
@@ -70,14 +71,15 @@ struct SimulatedCamera::Impl {
   double modulation_hz = 20e6;
   double range_m = 7.5;
 
-  std::unique_ptr<SceneGeometry> geometry;  // stage 1: Embree scene of `scene`
-  std::vector<char> dynamic_object;         // per object: does it move
-  PixelRays rays;                           // stage 1: subsample and central rays
-  SubsampleRadiometry rad;                  // stage 2: camera factors per subsample
-  MaterialTable mats;                       // stage 2: shading constants per object
-  ScatterPlan scatter;                      // stage 3: scattering PSF
-  InterreflectionBuffers ir;                // stage 3: inter-reflection per pixel
-  Image<float> fpn_m;                       // stage 5: fixed-pattern offsets, m
+  std::unique_ptr<SceneGeometry> geometry;      // stage 1: Embree scene of `scene`
+  std::unique_ptr<SubsampleShortcut> shortcut;  // stage 1: the planar shortcut, when on
+  std::vector<char> dynamic_object;             // per object: does it move
+  PixelRays rays;                               // stage 1: subsample and central rays
+  SubsampleRadiometry rad;                      // stage 2: camera factors per subsample
+  MaterialTable mats;                           // stage 2: shading constants per object
+  ScatterPlan scatter;                          // stage 3: scattering PSF
+  InterreflectionBuffers ir;                    // stage 3: inter-reflection per pixel
+  Image<float> fpn_m;                           // stage 5: fixed-pattern offsets, m
 
   std::vector<Render> renders;  // 1 or 4 (one per tap time)
   std::vector<RenderKey> keys;
@@ -92,7 +94,10 @@ struct SimulatedCamera::Impl {
   // Per thread: one row of rays and the shading terms of each ray.
   struct Scratch {
     RayBatch rays;
-    std::vector<float> cos_i;   // cosine of incidence
+    RayBatch rest;                  // the planar shortcut: subsample rays Embree casts
+    std::vector<unsigned> rest_at;  // their positions in `rays`
+    std::vector<std::uint8_t> ok;   // per subsample: the closed form holds
+    std::vector<float> cos_i;       // cosine of incidence
     std::vector<float> weight;  // active electrons / s before the 1/d^2 and phase: I cos4 brdf cos
     std::vector<float> dist;    // hit distance, 1 on a miss (weight 0) so the phase stays finite
     std::vector<float> bg;      // background radiance times sub_bg
@@ -117,6 +122,7 @@ struct SimulatedCamera::Impl {
     const std::size_t np = static_cast<std::size_t>(width) * height;
     rays.group = BlockGroup(ss, geometry->PacketWidth(), width);
     BuildPixelRays(model, ss, rays, rad);
+    if (options.planar_shortcut) shortcut = std::make_unique<SubsampleShortcut>(scene, model, rays);
     scatter = PlanScatter(model.scattering, width, height);
     fpn_m = options.fixed_pattern ? FixedPatternMap(model) : Image<float>(width, height, 0.f);
     truth_distance.assign(np, kInf);
@@ -180,7 +186,9 @@ struct SimulatedCamera::Impl {
     const bool truth_from_center = truth && ss % 2 == 1;
     const int center_sub = (ss / 2) * ss + ss / 2;
     const std::size_t ns = static_cast<std::size_t>(width) * s2;  // subsample rays of a row
-    const std::size_t nr = ns + (truth && !truth_from_center ? width : 0);
+    // The planar shortcut casts every central ray first (they are the truth rays too).
+    const std::size_t nr = ns + (truth && !truth_from_center && !shortcut ? width : 0);
+    if (shortcut) CastCentersForShortcut(rot, org, pose, truth);
     const auto n_obj = static_cast<unsigned>(scene.objects.size());
     object_radiance.push_back(0.f);  // rays that hit nothing
     MirrorContext mirror;
@@ -210,8 +218,30 @@ struct SimulatedCamera::Impl {
           Rotate(rot, &center_x[row_px], &center_y[row_px], &center_z[row_px], width, b, ns);
         }
         // Primary rays of the row (and the truth rays) in coherent packets.
-        geometry->Trace(&ctx, org, nr, b);
-        if (truth) {
+        if (shortcut) {
+          const std::size_t m = shortcut->Fill(r, b, sc.rest_at, sc.ok);
+          RayBatch& rest = sc.rest;
+          rest.Resize(m);
+          for (std::size_t j = 0; j < m; ++j) {
+            const std::size_t i = sc.rest_at[j];
+            rest.dx[j] = b.dx[i];
+            rest.dy[j] = b.dy[i];
+            rest.dz[j] = b.dz[i];
+          }
+          geometry->Trace(&ctx, org, m, rest);
+          for (std::size_t j = 0; j < m; ++j) {
+            const std::size_t i = sc.rest_at[j];
+            b.t[i] = rest.t[j];
+            b.geom[i] = rest.geom[j];
+            b.prim[i] = rest.prim[j];
+            b.nx[i] = rest.nx[j];
+            b.ny[i] = rest.ny[j];
+            b.nz[i] = rest.nz[j];
+          }
+        } else {
+          geometry->Trace(&ctx, org, nr, b);
+        }
+        if (truth && !shortcut) {
           for (int c = 0; c < width; ++c) {
             truth_distance[row_px + c] =
                 truth_from_center ? b.t[rays.Index(center_sub, c)] : b.t[ns + c];
@@ -275,6 +305,28 @@ struct SimulatedCamera::Impl {
       Interreflect(ic, pose, ir, out);
     }
     if (options.scattering) Scatter(out);
+  }
+
+  // The planar shortcut's first pass: every pixel's central ray (and so the truth distances),
+  // then the map of quads whose subsamples take the closed form.
+  void CastCentersForShortcut(const Eigen::Matrix3f& rot, const Eigen::Vector3f& org,
+                              const Eigen::Isometry3d& pose, bool truth) {
+    RayBatch& centers = shortcut->Centers();
+    pool->Run(height, [&](int r0, int r1, int) {
+      RTCIntersectContext ctx;
+      rtcInitIntersectContext(&ctx);
+      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+      for (int r = r0; r < r1; ++r) {
+        const std::size_t row_px = static_cast<std::size_t>(r) * width;
+        Rotate(rot, &rays.center_x[row_px], &rays.center_y[row_px], &rays.center_z[row_px], width,
+               centers, row_px);
+        geometry->Trace(&ctx, org, width, centers, row_px);
+        shortcut->FinishRow(r);
+        if (truth) std::copy_n(&centers.t[row_px], width, &truth_distance[row_px]);
+      }
+    });
+    pool->Run(height, [&](int r0, int r1, int) { shortcut->MarkQuads(r0, r1); });
+    shortcut->ClearNearCorners(scene, *geometry, pose);
   }
 
   // Ground truth alone (when the taps were rendered at other times).
