@@ -874,7 +874,7 @@ void RunBench(const BenchOptions& o) {
       sim_rows.push_back(SimulatorFps("SR-2 pavilion, moving camera, planar shortcut",
                                       bench::MovingPavilion(), sim::ResolveCameraModel("sr2"), th,
                                       t, true));
-      sim_rows.push_back(SimulatorFps("generic 640x480 model, moving camera, planar shortcut",
+      sim_rows.push_back(SimulatorFps("generic 640x480 model, pavilion, moving, planar shortcut",
                                       bench::MovingPavilion(),
                                       sim::ResolveCameraModel("generic640x480"), th, t, true));
     }

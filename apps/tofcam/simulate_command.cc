@@ -174,9 +174,11 @@ void SetupSimulateCommand(CLI::App& app) {
   sub->add_option("--interreflection-samples", o->interreflection_samples,
                   "Hemisphere samples per evaluated point (1..256)")
       ->capture_default_str();
-  sub->add_flag("--planar-shortcut", o->planar_shortcut,
-                "Cast subsample rays in closed form inside single triangles (about 1.3x faster; "
-                "frames equal to the exact ones up to rounding, docs/simulator.md)");
+  sub->add_flag(
+      "--planar-shortcut", o->planar_shortcut,
+      "Cast subsample rays in closed form on the plane their pixel centres hit (1.3-1.45x "
+      "faster with a moving camera; frames equal to the exact ones up to rounding, "
+      "docs/simulator.md)");
   sub->callback([o] { RunSimulate(*o); });
 }
 

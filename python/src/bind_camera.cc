@@ -161,8 +161,8 @@ void BindSimulatorOptions(py::module_& m) {
       .def_readwrite("interreflection", &O::interreflection, "One-bounce diffuse inter-reflection.")
       .def_readwrite("interreflection_samples", &O::interreflection_samples, "1..256.")
       .def_readwrite("planar_shortcut", &O::planar_shortcut,
-                     "Subsample rays in closed form inside single triangles (faster; frames "
-                     "equal to the exact ones up to rounding).")
+                     "Subsample rays in closed form on the plane their pixel centres hit (faster; "
+                     "frames equal to the exact ones up to rounding).")
       .def_readwrite("motion_threshold_m", &O::motion_threshold_m, "m.")
       .def_readwrite("truth_mixed_span_m", &O::truth_mixed_span_m, "m.")
       .def_readwrite("truth_bias_m", &O::truth_bias_m, "m.")

@@ -35,10 +35,22 @@ struct Packet<16> {
   }
 };
 
+// The first m hits of a packet into rays [q, q + m) of b (inlined, so a constant m is a
+// fixed-size copy).
+template <typename RayHit>
+inline void StoreHits(const RayHit& rh, std::size_t m, std::size_t q, RayBatch& b) {
+  std::copy_n(rh.ray.tfar, m, &b.t[q]);
+  std::copy_n(rh.hit.geomID, m, &b.geom[q]);
+  std::copy_n(rh.hit.primID, m, &b.prim[q]);
+  std::copy_n(rh.hit.Ng_x, m, &b.nx[q]);
+  std::copy_n(rh.hit.Ng_y, m, &b.ny[q]);
+  std::copy_n(rh.hit.Ng_z, m, &b.nz[q]);
+}
+
 // Intersects rays [first, first + n) of `b`, all from `org`, in packets of K consecutive rays.
 template <int K>
-void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t first,
-            std::size_t n, RayBatch& b) {
+void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
+            RayBatch& b, std::size_t first) {
   typename Packet<K>::RayHit rh{};
   alignas(64) int valid[K];
   for (int l = 0; l < K; ++l) {
@@ -59,12 +71,7 @@ void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
     std::fill_n(rh.hit.geomID, K, RTC_INVALID_GEOMETRY_ID);
     std::fill_n(rh.hit.instID[0], K, RTC_INVALID_GEOMETRY_ID);
     Packet<K>::Intersect(valid, scene, ctx, &rh);
-    std::copy_n(rh.ray.tfar, K, &b.t[q]);
-    std::copy_n(rh.hit.geomID, K, &b.geom[q]);
-    std::copy_n(rh.hit.primID, K, &b.prim[q]);
-    std::copy_n(rh.hit.Ng_x, K, &b.nx[q]);
-    std::copy_n(rh.hit.Ng_y, K, &b.ny[q]);
-    std::copy_n(rh.hit.Ng_z, K, &b.nz[q]);
+    StoreHits(rh, K, q, b);
   }
   if (full == end) return;
   // The partial packet: inactive lanes repeat a valid ray.
@@ -81,17 +88,12 @@ void TraceK(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org
     rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
   }
   Packet<K>::Intersect(valid, scene, ctx, &rh);
-  std::copy_n(rh.ray.tfar, m, &b.t[q]);
-  std::copy_n(rh.hit.geomID, m, &b.geom[q]);
-  std::copy_n(rh.hit.primID, m, &b.prim[q]);
-  std::copy_n(rh.hit.Ng_x, m, &b.nx[q]);
-  std::copy_n(rh.hit.Ng_y, m, &b.ny[q]);
-  std::copy_n(rh.hit.Ng_z, m, &b.nz[q]);
+  StoreHits(rh, m, q, b);
 }
 
 // The same one ray at a time (CPUs without native packets).
-void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t first,
-            std::size_t n, RayBatch& b) {
+void Trace1(RTCScene scene, RTCIntersectContext* ctx, const Eigen::Vector3f& org, std::size_t n,
+            RayBatch& b, std::size_t first) {
   for (std::size_t i = first; i < first + n; ++i) {
     RTCRayHit rh;
     SetRay(rh, org, Eigen::Vector3f(b.dx[i], b.dy[i], b.dz[i]), 0.f);
@@ -204,7 +206,10 @@ void SceneGeometry::PlaceObjects(double time_s) {
     rtcCommitGeometry(g);
     changed = true;
   }
-  if (changed) rtcCommitScene(rtc_scene_);
+  if (changed) {
+    rtcCommitScene(rtc_scene_);
+    ++version_;
+  }
 }
 
 const float* SceneGeometry::WorldVertices(std::size_t i) const {
@@ -227,16 +232,16 @@ void SceneGeometry::Trace(RTCIntersectContext* ctx, const Eigen::Vector3f& org, 
                           RayBatch& b, std::size_t first) const {
   switch (packet_width_) {
     case 16:
-      TraceK<16>(rtc_scene_, ctx, org, first, n, b);
+      TraceK<16>(rtc_scene_, ctx, org, n, b, first);
       break;
     case 8:
-      TraceK<8>(rtc_scene_, ctx, org, first, n, b);
+      TraceK<8>(rtc_scene_, ctx, org, n, b, first);
       break;
     case 4:
-      TraceK<4>(rtc_scene_, ctx, org, first, n, b);
+      TraceK<4>(rtc_scene_, ctx, org, n, b, first);
       break;
     default:
-      Trace1(rtc_scene_, ctx, org, first, n, b);
+      Trace1(rtc_scene_, ctx, org, n, b, first);
   }
 }
 

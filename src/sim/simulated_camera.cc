@@ -122,7 +122,10 @@ struct SimulatedCamera::Impl {
     const std::size_t np = static_cast<std::size_t>(width) * height;
     rays.group = BlockGroup(ss, geometry->PacketWidth(), width);
     BuildPixelRays(model, ss, rays, rad);
-    if (options.planar_shortcut) shortcut = std::make_unique<SubsampleShortcut>(scene, model, rays);
+    // With one ray per pixel every subsample is a central ray: nothing to save.
+    if (options.planar_shortcut && ss > 1) {
+      shortcut = std::make_unique<SubsampleShortcut>(scene, model, rays);
+    }
     scatter = PlanScatter(model.scattering, width, height);
     fpn_m = options.fixed_pattern ? FixedPatternMap(model) : Image<float>(width, height, 0.f);
     truth_distance.assign(np, kInf);
@@ -326,7 +329,7 @@ struct SimulatedCamera::Impl {
       }
     });
     pool->Run(height, [&](int r0, int r1, int) { shortcut->MarkQuads(r0, r1); });
-    shortcut->ClearNearCorners(scene, *geometry, pose);
+    shortcut->ClearZones(scene, *geometry, pose);
   }
 
   // Ground truth alone (when the taps were rendered at other times).

@@ -16,10 +16,16 @@
 // than the square (a straight edge across the square always leaves a corner on each side). So
 // every quad near a triangle's corner is cast too: the zone within which the triangle's image is
 // narrower than kCornerWidthPx (a sharp corner's zone runs far along its edges; a thin triangle
-// is all zone). Frames then differ from the exact ones (every subsample cast) by float rounding
-// alone: Embree's t against the closed form's, a few units in the last place. The zones use the
-// pinhole part of the camera model, grown by the lens distortion's largest displacement (and
-// kCornerMarginPx) and widened by its smallest magnification.
+// is all zone). That argument assumes that surfaces do not pass through each other: where they
+// do, a visible region can also end where an edge pierces another triangle, between the edge and
+// the line in which the two planes meet, so quads along both lines are cast near every such
+// point too (found with Embree along every edge, again whenever objects move). Frames then
+// differ from the exact ones (every subsample cast) by float rounding: Embree's t against the
+// closed form's, a few units in the last place. The zones use the pinhole part of the camera
+// model, grown by the lens distortion's largest displacement (and kCornerMarginPx) and widened by
+// its smallest magnification. Left out: coincident surfaces (two coplanar triangles overlapping,
+// which Embree itself resolves arbitrarily) and parts of a triangle closer than 1 mm to the
+// camera plane.
 
 #include <Eigen/Geometry>
 #include <array>
@@ -33,10 +39,11 @@
 
 namespace tofcam::sim::internal {
 
-/// Width of a triangle corner's image (px, the chord between its two edges, after the lens
-/// distortion's smallest magnification) below which its quads are cast. A triangle that covers
-/// part of a unit square but none of its corners is, there, no wider than the square's diagonal
-/// (sqrt 2 = 1.41 px); 2.5 px leaves a margin.
+/// Width of a triangle corner's image (px, the chord between its two edges, divided by the lens
+/// distortion's smallest magnification along the image axes) below which its quads are cast. A
+/// triangle that covers part of a unit square but none of its corners is, there, no wider than
+/// the square's diagonal (sqrt 2 = 1.41 px); 2.5 px leaves a margin (also for the diagonal
+/// magnification, which the axis ratios do not sample).
 inline constexpr double kCornerWidthPx = 2.5;
 /// Margin around each corner zone, px, on top of the lens distortion's largest displacement.
 inline constexpr double kCornerMarginPx = 0.5;
@@ -57,14 +64,16 @@ class SubsampleShortcut {
   /// or two triangles of one convex planar quadrilateral (mates), or all miss. Needs every row's
   /// centres stored. Rows may run in parallel.
   void MarkQuads(int y0, int y1);
-  /// Clears the quads in every triangle corner's zone (serial; after MarkQuads), the triangles
-  /// at their current pose seen from `camera_pose` (camera to world).
-  void ClearNearCorners(const Scene& scene, const SceneGeometry& geometry,
-                        const Eigen::Isometry3d& camera_pose);
+  /// Clears the quads in every triangle corner's zone and along the lines where surfaces pass
+  /// through each other near the points edges pierce them (serial; after MarkQuads), the
+  /// triangles at their current pose seen from `camera_pose` (camera to world).
+  void ClearZones(const Scene& scene, const SceneGeometry& geometry,
+                  const Eigen::Isometry3d& camera_pose);
 
   /// Closed-form hits of row r's subsample rays in b (directions set, ns = width * S^2 rays):
-  /// fills t, geom, prim and the normal where the shortcut holds and writes the positions of the
-  /// others to `rest_at` (resized to ns); returns how many those are.
+  /// writes t, geom, prim and the normal of every lane (valid where the shortcut holds, `ok`
+  /// set), the positions of the others to `rest_at` (resized to ns), and returns how many those
+  /// are; the caller has Embree cast them and overwrite their lanes.
   std::size_t Fill(int r, RayBatch& b, std::vector<unsigned>& rest_at,
                    std::vector<std::uint8_t>& ok) const;
 
@@ -73,7 +82,7 @@ class SubsampleShortcut {
   double fx_ = 1, fy_ = 1, cx_ = 0, cy_ = 0;  // pinhole part of the intrinsics
   double distortion_shift_px_ = 0;            // largest |distorted - pinhole| in the image
   double corner_width_px_ = kCornerWidthPx;   // kCornerWidthPx / the smallest magnification
-  int group_ = 1;                // PixelRays::group
+  int group_ = 1;                             // PixelRays::group
   std::vector<int> quad_offset_;  // per subsample: its quad's padded index - pixel's column
   int center_sub_ = -1;           // odd S: the subsample that is the central ray
   // Per pixel: the central ray and its hit, and the hit plane's offset h = n . (hit - org).
@@ -87,7 +96,28 @@ class SubsampleShortcut {
   std::vector<std::size_t> object_first_;
   std::vector<std::array<unsigned, 3>> mates_;
 
+  // Every undirected edge of every object with its one or two triangles.
+  struct Edge {
+    unsigned object;
+    int a, b;         // vertex indices
+    unsigned t1, t2;  // triangles; t2 = RTC_INVALID_GEOMETRY_ID for a border edge
+  };
+  std::vector<Edge> edges_;
+  // Where an edge passes through another triangle (world frame): the point, the edge's direction
+  // and the lines in which the pierced triangle's plane meets the planes of the edge's triangles.
+  struct Pierce {
+    Eigen::Vector3d point, edge;
+    Eigen::Vector3d line1 = Eigen::Vector3d::Zero(), line2 = Eigen::Vector3d::Zero();
+  };
+  std::vector<Pierce> pierces_;         // of the current pose
+  std::vector<Pierce> static_pierces_;  // between objects that never move
+  static constexpr int kMaxCrossingsPerEdge = 64;
+  unsigned long pierces_version_ = 0;  // SceneGeometry::Version() they were found at
+  bool pierces_found_ = false;
+
   void BuildMates(const Scene& scene);
+  void FindPierces(const Scene& scene, const SceneGeometry& geometry);
+  void ClearBox(double u0, double u1, double v0, double v1);
   [[nodiscard]] bool Mates(unsigned geom, unsigned p, unsigned q) const;
 };
 

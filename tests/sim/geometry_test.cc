@@ -66,6 +66,49 @@ TEST(GeometryTest, PacketsGiveTheSameHitsAsSingleRaysIncludingAPartialPacket) {
   }
 }
 
+TEST(GeometryTest, TraceFromAnOffsetLeavesTheOtherRaysAndReportsTheTriangle) {
+  // A box: rays [first, first + n) fan across its front face (two triangles), the rest of the
+  // batch carries sentinels that the trace must not touch.
+  const Scene scene = ParseScene(
+      "materials: {w: {albedo: 0.5}}\nobjects:\n"
+      "  - {type: box, material: w, size_m: [2, 2, 1], position_m: [0, 0, 3]}\n",
+      "inline", {});
+  const SceneGeometry g(scene);
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  const std::size_t total = 60, first = 5, n = 37;  // a partial packet at any width
+  RayBatch b;
+  b.Resize(total);
+  for (std::size_t i = 0; i < total; ++i) {
+    const Eigen::Vector3f d =
+        Eigen::Vector3f(0.016f * (static_cast<float>(i) - 23), 0.002f, 1.f).normalized();
+    b.dx[i] = d.x();
+    b.dy[i] = d.y();
+    b.dz[i] = d.z();
+    b.t[i] = -1.f;  // sentinel
+    b.geom[i] = 77u;
+  }
+  g.Trace(&ctx, {0, 0, 0}, n, b, first);
+  std::set<unsigned> prims;
+  for (std::size_t i = 0; i < total; ++i) {
+    if (i < first || i >= first + n) {
+      EXPECT_EQ(b.t[i], -1.f) << i;
+      EXPECT_EQ(b.geom[i], 77u) << i;
+      continue;
+    }
+    EXPECT_NEAR(b.t[i], 2.5f / b.dz[i], 1e-4f) << i;  // the front face at z = 2.5
+    EXPECT_EQ(b.geom[i], 0u);
+    // The same triangle as a single ray reports.
+    RTCRayHit rh;
+    SetRay(rh, {0, 0, 0}, Eigen::Vector3f(b.dx[i], b.dy[i], b.dz[i]), 0.f);
+    rtcIntersect1(g.Handle(), &ctx, &rh);
+    EXPECT_EQ(b.prim[i], rh.hit.primID) << i;
+    prims.insert(b.prim[i]);
+  }
+  // The fan crosses the face's centre just off both diagonals, so it crosses either one.
+  EXPECT_EQ(prims.size(), 2u) << "the fan should cross the face's diagonal";
+}
+
 TEST(GeometryTest, PlaceObjectsMovesADynamicBox) {
   const Scene scene = ParseScene(
       "materials: {w: {albedo: 0.5}}\nobjects:\n"

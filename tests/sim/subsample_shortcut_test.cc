@@ -2,12 +2,18 @@
 // the exact simulator, which casts every subsample ray with Embree. With the noise off, the two
 // must give the same frames up to float rounding: the closed-form distance of a subsample differs
 // from Embree's in the last bits, which moves a register by at most one count where the value
-// lies at a rounding boundary. The ground truth (central rays, cast by Embree in both) must be
-// bit for bit the same. Three scenes are built to defeat a shortcut that looked only at the four
-// pixel centres around a subsample: a pole thinner than a pixel, a cube smaller than a pixel and
-// the sharp corner of a large triangle, each seen by a subsample ray but by no pixel centre.
+// lies at a rounding boundary. A value that sits on a threshold (full well, a truth cause's
+// 5 cm / 1 cm limits) can flip instead; none does in these scenes on this machine, but Embree's
+// last bits differ between instruction sets, so up to kTieFraction of the pixels may (a count
+// of 2 at 160x124, 30 at 640x480). The truth distance (central rays, cast by Embree in both)
+// must be bit for bit the same. Four scenes are built to defeat a shortcut that looked only at
+// the four pixel centres around a subsample: a pole thinner than a pixel, a cube smaller than a
+// pixel, the sharp corner of a large triangle and the sliver where a plate pokes out of a wall,
+// each seen by a subsample ray but by no pixel centre; there the frames must agree to one count
+// everywhere.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -30,21 +36,27 @@ SimulatorOptions Noiseless(bool shortcut) {
   return o;
 }
 
+// Fraction of pixels allowed to differ by more than rounding (threshold ties, see above).
+constexpr double kTieFraction = 1e-4;
+
 struct Difference {
-  int max_counts = 0;         // largest |exact - shortcut| over the three registers
-  long pixels = 0;            // pixels where they differ at all
-  long truth_distance = 0;    // pixels whose truth distance differs (bitwise)
-  long truth_causes = 0;      // pixels whose truth causes differ
+  int max_counts = 0;               // largest |exact - shortcut| over the three registers
+  std::int64_t pixels = 0;          // pixels where they differ at all
+  std::int64_t beyond_one = 0;      // pixels where they differ by more than one count
+  std::int64_t truth_distance = 0;  // pixels whose truth distance differs (bitwise)
+  std::int64_t truth_causes = 0;    // pixels whose truth causes differ
 };
 
 Difference Compare(const Frame& a, const Frame& b) {
   Difference d;
   for (std::size_t i = 0; i < a.distance.size(); ++i) {
-    const int m = std::max({std::abs(a.distance[i] - b.distance[i]),
-                            std::abs(a.amplitude[i] - b.amplitude[i]),
+    // The distance register wraps at the unambiguous range: 0 and 65535 are one count apart.
+    const int dd = std::abs(a.distance[i] - b.distance[i]);
+    const int m = std::max({std::min(dd, 65536 - dd), std::abs(a.amplitude[i] - b.amplitude[i]),
                             std::abs(a.intensity[i] - b.intensity[i])});
     d.max_counts = std::max(d.max_counts, m);
     d.pixels += m > 0 ? 1 : 0;
+    d.beyond_one += m > 1 ? 1 : 0;
     const float ta = a.truth->radial_distance_m[i], tb = b.truth->radial_distance_m[i];
     d.truth_distance += (ta == tb || (std::isinf(ta) && std::isinf(tb))) ? 0 : 1;
     d.truth_causes += a.truth->causes[i].bits() == b.truth->causes[i].bits() ? 0 : 1;
@@ -52,29 +64,41 @@ Difference Compare(const Frame& a, const Frame& b) {
   return d;
 }
 
-// Frames of the exact and the shortcut simulator, side by side, must agree to one count.
-void ExpectSameFrames(const Scene& scene, const CameraModel& model, SimulatorOptions exact,
-                      int frames, const std::string& what) {
+// Frames of the exact and the shortcut simulator, side by side, must agree to one count (up to
+// `ties` pixels a frame beyond that); returns how many pixels differed at all.
+std::int64_t ExpectSameFrames(const Scene& scene, const CameraModel& model, SimulatorOptions exact,
+                              int frames, const std::string& what, bool allow_ties = true) {
   SimulatorOptions fast = exact;
   fast.planar_shortcut = true;
   SimulatedCamera a(scene, model, exact);
   SimulatedCamera b(scene, model, fast);
+  std::int64_t differing = 0;
   for (int f = 0; f < frames; ++f) {
     const Frame fa = *a.Grab();
     const Frame fb = *b.Grab();
     const Difference d = Compare(fa, fb);
-    EXPECT_LE(d.max_counts, 1) << what << ", frame " << f << ": " << d.pixels
-                               << " pixels differ, by up to " << d.max_counts << " counts";
+    const auto ties =
+        allow_ties
+            ? static_cast<std::int64_t>(kTieFraction * static_cast<double>(fa.distance.size()))
+            : 0;
+    EXPECT_LE(d.beyond_one, ties) << what << ", frame " << f << ": " << d.pixels
+                                  << " pixels differ, by up to " << d.max_counts << " counts";
     EXPECT_EQ(d.truth_distance, 0) << what << ", frame " << f;
-    EXPECT_EQ(d.truth_causes, 0) << what << ", frame " << f;
+    EXPECT_LE(d.truth_causes, ties) << what << ", frame " << f;
+    differing += d.pixels;
   }
+  return differing;
 }
 
 TEST(SubsampleShortcutTest, EveryBuiltinSceneGivesTheExactFramesUpToRounding) {
+  std::int64_t differing = 0;
   for (const std::string& name : BuiltinSceneNames()) {
-    ExpectSameFrames(LoadBuiltinScene(name), ResolveCameraModel("sr2"), Noiseless(false), 2,
-                     name);
+    differing += ExpectSameFrames(LoadBuiltinScene(name), ResolveCameraModel("sr2"),
+                                  Noiseless(false), 2, name);
   }
+  // The shortcut is in use: Embree and the closed form round differently, so some register
+  // somewhere differs by a count (with every subsample cast by Embree, none would).
+  EXPECT_GT(differing, 0) << "the closed form was never used";
 }
 
 TEST(SubsampleShortcutTest, OddSupersamplingTwoThreadsAndALargerCameraToo) {
@@ -83,7 +107,9 @@ TEST(SubsampleShortcutTest, OddSupersamplingTwoThreadsAndALargerCameraToo) {
   ExpectSameFrames(LoadBuiltinScene("pavilion"), ResolveCameraModel("sr2"), ss3, 1, "S = 3");
   SimulatorOptions ss1 = Noiseless(false);
   ss1.supersampling = 1;
-  ExpectSameFrames(LoadBuiltinScene("demo"), ResolveCameraModel("sr2"), ss1, 1, "S = 1");
+  // One ray per pixel: the option has nothing to save and changes nothing.
+  EXPECT_EQ(ExpectSameFrames(LoadBuiltinScene("demo"), ResolveCameraModel("sr2"), ss1, 1, "S = 1"),
+            0);
   SimulatorOptions two = Noiseless(false);
   two.threads = 2;
   ExpectSameFrames(LoadBuiltinScene("hand"), ResolveCameraModel("sr2"), two, 2, "2 threads");
@@ -118,15 +144,35 @@ double YAt(double v, double z) {
   return (v - in.cy_px) * z / in.fy_px;
 }
 
-// The object must matter (the exact frame differs from the bare wall's by far more than a count
-// somewhere) and the shortcut must see it as the exact simulator does.
-void ExpectSeenLikeTheExactSimulator(const Scene& with, const std::string& what,
+// A subsample of pixel (row, col) sees the object while none of the four pixel centres of its
+// quad, rows [row, row + 1] x columns [quad_col, quad_col + 1], does: their truth distance is the
+// bare wall's, and the pixel's registers differ from the bare wall's by more than 20 counts (far
+// beyond the one count of rounding; a surface seen edge-on returns little light, so a mixed
+// subsample may move a register by no more than about a hundred). The shortcut must then see the
+// object as the exact simulator does, to one count everywhere.
+struct Premise {
+  int row, col, quad_col;
+};
+
+void ExpectSeenLikeTheExactSimulator(const Scene& with, const std::string& what, Premise at,
                                      const CameraModel& model = ResolveCameraModel("sr2")) {
-  SimulatedCamera bare(WallWith(""), model, Noiseless(false));
-  SimulatedCamera exact(with, model, Noiseless(false));
-  const Difference seen = Compare(*bare.Grab(), *exact.Grab());
-  ASSERT_GT(seen.max_counts, 100) << what << " is not seen by any subsample: the case tests nothing";
-  ExpectSameFrames(with, model, Noiseless(false), 1, what);
+  SimulatedCamera bare_camera(WallWith(""), model, Noiseless(false));
+  SimulatedCamera exact_camera(with, model, Noiseless(false));
+  const Frame bare = *bare_camera.Grab();
+  const Frame exact = *exact_camera.Grab();
+  for (int r = at.row; r <= at.row + 1; ++r) {
+    for (int c = at.quad_col; c <= at.quad_col + 1; ++c) {
+      ASSERT_EQ(exact.truth->radial_distance_m(r, c), bare.truth->radial_distance_m(r, c))
+          << what << ": the pixel centre (" << r << ", " << c
+          << ") sees it; the case tests nothing";
+    }
+  }
+  const int moved =
+      std::max(std::abs(exact.distance(at.row, at.col) - bare.distance(at.row, at.col)),
+               std::abs(exact.amplitude(at.row, at.col) - bare.amplitude(at.row, at.col)));
+  ASSERT_GT(moved, 20) << what << ": no subsample of the pixel sees it (" << moved
+                       << " counts); the case tests nothing";
+  ExpectSameFrames(with, model, Noiseless(false), 1, what, /*allow_ties=*/false);
 }
 
 TEST(SubsampleShortcutTest, APoleThinnerThanAPixelBetweenPixelCentres) {
@@ -134,9 +180,9 @@ TEST(SubsampleShortcutTest, APoleThinnerThanAPixelBetweenPixelCentres) {
   // right-hand subsamples of column 90 and no pixel centre.
   const double z = 1.5, w = XAt(90.4, z) - XAt(90.1, z);
   const std::string pole = "  - {type: box, material: dark, size_m: [" + std::to_string(w) +
-                           ", 0.5, 0.01], position_m: [" + std::to_string(XAt(90.25, z)) +
-                           ", 0, " + std::to_string(z) + "]}\n";
-  ExpectSeenLikeTheExactSimulator(WallWith(pole), "a pole 0.3 px wide");
+                           ", 0.5, 0.01], position_m: [" + std::to_string(XAt(90.25, z)) + ", 0, " +
+                           std::to_string(z) + "]}\n";
+  ExpectSeenLikeTheExactSimulator(WallWith(pole), "a pole 0.3 px wide", {60, 90, 90});
 }
 
 TEST(SubsampleShortcutTest, APoleBetweenPixelCentresNearTheEdgeOfADistortingLens) {
@@ -154,22 +200,21 @@ TEST(SubsampleShortcutTest, APoleBetweenPixelCentresNearTheEdgeOfADistortingLens
   const double y = model.intrinsics.Unproject({12.25, 62.0}).y() /
                    model.intrinsics.Unproject({12.25, 62.0}).z() * z;
   const std::string pole = "  - {type: box, material: dark, size_m: [" +
-                           std::to_string(x_at(12.4) - x_at(12.1)) + ", 0.05, 0.001], position_m: [" +
-                           std::to_string(x_at(12.25)) + ", " + std::to_string(y) + ", " +
-                           std::to_string(z) + "]}\n";
+                           std::to_string(x_at(12.4) - x_at(12.1)) +
+                           ", 0.05, 0.001], position_m: [" + std::to_string(x_at(12.25)) + ", " +
+                           std::to_string(y) + ", " + std::to_string(z) + "]}\n";
   ExpectSeenLikeTheExactSimulator(WallWith(pole), "a pole 0.3 px wide behind a distorting lens",
-                                  model);
+                                  {62, 12, 12}, model);
 }
 
 TEST(SubsampleShortcutTest, ACubeSmallerThanAPixelBetweenPixelCentres) {
   // 0.35 px on a side at 1.5 m around the lower-right subsample of pixel (60, 90).
   const double z = 1.5, w = XAt(90.45, z) - XAt(90.1, z);
-  const std::string cube =
-      "  - {type: box, material: dark, size_m: [" + std::to_string(w) + ", " +
-      std::to_string(YAt(60.45, z) - YAt(60.1, z)) + ", " + std::to_string(w) +
-      "], position_m: [" + std::to_string(XAt(90.25, z)) + ", " + std::to_string(YAt(60.25, z)) +
-      ", " + std::to_string(z) + "]}\n";
-  ExpectSeenLikeTheExactSimulator(WallWith(cube), "a cube 0.35 px wide");
+  const std::string cube = "  - {type: box, material: dark, size_m: [" + std::to_string(w) + ", " +
+                           std::to_string(YAt(60.45, z) - YAt(60.1, z)) + ", " + std::to_string(w) +
+                           "], position_m: [" + std::to_string(XAt(90.25, z)) + ", " +
+                           std::to_string(YAt(60.25, z)) + ", " + std::to_string(z) + "]}\n";
+  ExpectSeenLikeTheExactSimulator(WallWith(cube), "a cube 0.35 px wide", {60, 90, 90});
 }
 
 TEST(SubsampleShortcutTest, TheSharpCornerOfALargeTriangle) {
@@ -188,7 +233,42 @@ TEST(SubsampleShortcutTest, TheSharpCornerOfALargeTriangle) {
                   Eigen::Vector3f(XAt(124.3, z), YAt(60.3 + half, z), z)};
   tri.triangles = {Eigen::Vector3i(0, 1, 2)};
   scene.objects.push_back(tri);
-  ExpectSeenLikeTheExactSimulator(scene, "a 4-degree corner");
+  ExpectSeenLikeTheExactSimulator(scene, "a 4-degree corner", {60, 91, 90});
+}
+
+TEST(SubsampleShortcutTest, TheSliverWhereAPlatePokesOutOfAWall) {
+  // A triangle (image corners (80, 60.35), (104, 60.35), (92, 54)) passes through the wall at
+  // z = 3 m: its plane, 1/z = 1/3 + 0.04 [(v - 60.35) - 0.07 (u - 94.5)] per metre, meets the
+  // wall in a line that leaves its lower edge (row 60.35) at column 94.5 at 4 degrees. The
+  // triangle is in front of the wall only in the thin wedge between that line and the edge,
+  // left of column 94.5: at column 90 and beyond it lies between the centres of rows 60 and 61,
+  // yet it covers the subsample at (90.75, 60.25), 6 cm in front of the wall. No vertex is near
+  // (the corner zones end at columns 86 and 98): only the zone around the point where the edge
+  // pierces the wall covers that quad.
+  Scene scene = WallWith("");
+  const CameraIntrinsics in = ResolveCameraModel("sr2").intrinsics;
+  const auto point = [&](double u, double v) {
+    const double z = 1 / (1.0 / 3 + 0.04 * ((v - 60.35) - 0.07 * (u - 94.5)));
+    return Eigen::Vector3f(static_cast<float>((u - in.cx_px) * z / in.fx_px),
+                           static_cast<float>((v - in.cy_px) * z / in.fy_px),
+                           static_cast<float>(z));
+  };
+  SceneObject plate;
+  plate.name = "plate";
+  plate.material = 0;
+  plate.vertices = {point(80, 60.35), point(104, 60.35), point(92, 54)};
+  plate.triangles = {Eigen::Vector3i(0, 1, 2)};
+  Scene moving = scene;
+  scene.objects.push_back(plate);
+  ExpectSeenLikeTheExactSimulator(scene, "a plate poking out of the wall", {60, 91, 90});
+  // The same plate as a moving object (a micrometre in 1000 s: its pose changes every frame, its
+  // vertices do not), whose crossings are found again at every pose.
+  Keyframe later;
+  later.time_s = 1000.0;
+  later.position_m = Eigen::Vector3d(0, 0, 1e-6);
+  plate.motion.keys = {Keyframe{}, later};
+  moving.objects.push_back(plate);
+  ExpectSeenLikeTheExactSimulator(moving, "a moving plate poking out of the wall", {60, 91, 90});
 }
 
 }  // namespace
