@@ -7,6 +7,7 @@
 
 #include <Eigen/Geometry>
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "hot_loop.h"
@@ -67,7 +68,7 @@ class SceneGeometry {
   /// Moves the dynamic objects to their pose at `time_s`; recommits only when something moved.
   void PlaceObjects(double time_s);
   /// Grows by one each time PlaceObjects moves something (0 at construction).
-  [[nodiscard]] unsigned long Version() const noexcept { return version_; }
+  [[nodiscard]] std::uint64_t Version() const noexcept { return version_; }
   /// Whether object i moves (its motion is not static).
   [[nodiscard]] bool Dynamic(std::size_t i) const { return dynamic_object_[i] != 0; }
   /// Rays per packet the CPU runs natively: 16, 8, 4 or 1.
@@ -95,7 +96,7 @@ class SceneGeometry {
   std::vector<char> dynamic_object_;            // per object
   std::vector<Eigen::Isometry3d> object_pose_;  // last committed
   int packet_width_ = 1;
-  unsigned long version_ = 0;
+  std::uint64_t version_ = 0;
 };
 
 /// The camera's pose in the world at `time_s` and pan angle `pan_rad`: the scene's camera pose is

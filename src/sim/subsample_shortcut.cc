@@ -233,8 +233,7 @@ void SubsampleShortcut::BuildMates(const Scene& scene) {
     for (const auto& entry : by_edge) {
       const std::pair<int, int>& edge = entry.first;
       const std::vector<unsigned>& tris = entry.second;
-      edges_.push_back({static_cast<unsigned>(o), edge.first, edge.second, tris[0],
-                        tris.size() > 1 ? tris[1] : kNone});
+      edges_.push_back({static_cast<unsigned>(o), edge.first, edge.second, tris});
       if (tris.size() != 2) continue;
       const Eigen::Vector3i& t1 = obj.triangles[tris[0]];
       const Eigen::Vector3i& t2 = obj.triangles[tris[1]];
@@ -318,6 +317,7 @@ void SubsampleShortcut::MarkQuads(int y0, int y1) {
 }
 
 void SubsampleShortcut::ClearBox(double u0, double u1, double v0, double v1) {
+  if (!(u0 <= u1) || !(v0 <= v1)) return;  // empty or not finite
   // Quad (y, x) spans [x, x + 1] x [y, y + 1] in pixel coordinates; padded indices + 1. Clamped
   // in double first: a point near the camera plane can project far beyond int's range.
   const double grow = distortion_shift_px_ + kCornerMarginPx;
@@ -387,124 +387,147 @@ void SubsampleShortcut::ClearZones(const Scene& scene, const SceneGeometry& geom
       }
     }
   }
-  // Where surfaces pass through each other, a visible region's corner can also sit where an
-  // edge pierces another triangle: between the line the two planes meet in and the edge, a
-  // wedge no vertex zone covers. Its narrow part (chord below corner_width_px_) lies within
-  // half that chord of one of the two lines, so quads along both lines are cleared that far.
-  FindPierces(scene, geometry);
-  const double half_chord = corner_width_px_ / 2;
-  const double diagonal = std::hypot(width_, height_);
-  const auto project = [&](const Eigen::Vector3d& q) {
-    return Eigen::Vector2d(fx_ * q.x() / q.z() + cx_, fy_ * q.y() / q.z() + cy_);
-  };
-  for (const Pierce& pc : pierces_) {
-    const Eigen::Vector3d p = to_camera * pc.point;
-    if (p.z() < kNearZ) continue;  // behind the camera
-    const Eigen::Vector2d at = project(p);
-    if (at.x() < -diagonal || at.x() > width_ + diagonal || at.y() < -diagonal ||
-        at.y() > height_ + diagonal) {
-      continue;
-    }
-    // Image directions of the edge and the meeting lines through the point (a step of 1e-3 of
-    // the point's depth keeps the projection's curvature out of the direction).
-    const double step = 1e-3 * p.z();
-    const auto image_dir = [&](const Eigen::Vector3d& world_dir) -> Eigen::Vector2d {
-      const Eigen::Vector3d d = to_camera.linear() * world_dir;
-      Eigen::Vector3d q = p + step * d.normalized();
-      if (q.z() < kNearZ) q = p - step * d.normalized();
-      const Eigen::Vector2d v = project(q) - at;
-      return v.norm() > 0 ? Eigen::Vector2d(v / v.norm()) : Eigen::Vector2d(1, 0);
-    };
-    const Eigen::Vector2d e = image_dir(pc.edge);
-    for (const Eigen::Vector3d& line : {pc.line1, pc.line2}) {
-      if (line.squaredNorm() == 0) continue;
-      const Eigen::Vector2d l = image_dir(line);
-      const double cos_a = std::min(1.0, std::abs(l.dot(e)));
-      const double half_sin = std::sqrt((1 - cos_a) / 2);
-      const double reach = half_sin > 0 ? std::min(half_chord / half_sin, diagonal) : diagonal;
-      for (const Eigen::Vector2d& dir : {l, e}) {
-        // The arm [-reach, reach] clipped to the image (with margin), cleared in pieces of at
-        // most 2 px, each piece's box grown by half the chord.
-        double s0 = -reach, s1 = reach;
-        const double lo[2] = {-grow - half_chord - 1, -grow - half_chord - 1};
-        const double hi[2] = {width_ + grow + half_chord, height_ + grow + half_chord};
-        for (int k = 0; k < 2; ++k) {
-          if (dir[k] == 0) {
-            if (at[k] < lo[k] || at[k] > hi[k]) s1 = s0 - 1;
-            continue;
-          }
-          const double a = (lo[k] - at[k]) / dir[k], b = (hi[k] - at[k]) / dir[k];
-          s0 = std::max(s0, std::min(a, b));
-          s1 = std::min(s1, std::max(a, b));
-        }
-        for (double s = s0; s < s1; s += 2) {
-          const Eigen::Vector2d q0 = at + s * dir, q1 = at + std::min(s + 2, s1) * dir;
-          clear(std::min(q0.x(), q1.x()) - half_chord, std::max(q0.x(), q1.x()) + half_chord,
-                std::min(q0.y(), q1.y()) - half_chord, std::max(q0.y(), q1.y()) + half_chord);
-        }
+  // Where surfaces pass through each other, a visible region can also end on the segment where
+  // two triangles meet, away from every vertex; the part of such a region narrower than
+  // corner_width_px_ lies within that width of the segment, so a band that wide along every
+  // meeting segment is cleared (clipped to the camera's side of z = kNearZ and to the image).
+  FindCrossings(scene, geometry);
+  if (crossings_overflow_) {
+    std::fill(quad_ok_.begin(), quad_ok_.end(), 0);  // not every crossing found: cast everything
+    return;
+  }
+  const double band = corner_width_px_;
+  const double lo[2] = {-grow - band - 1, -grow - band - 1};
+  const double hi[2] = {width_ + grow + band, height_ + grow + band};
+  for (const Segment& seg : crossings_) {
+    Eigen::Vector3d a = to_camera * seg.a, b = to_camera * seg.b;
+    if (a.z() < kNearZ && b.z() < kNearZ) continue;  // behind the camera
+    if (a.z() < kNearZ) a += (kNearZ - a.z()) / (b.z() - a.z()) * (b - a);
+    if (b.z() < kNearZ) b += (kNearZ - b.z()) / (a.z() - b.z()) * (a - b);
+    const Eigen::Vector2d pa(fx_ * a.x() / a.z() + cx_, fy_ * a.y() / a.z() + cy_);
+    const Eigen::Vector2d pb(fx_ * b.x() / b.z() + cx_, fy_ * b.y() / b.z() + cy_);
+    // The image segment pa + s (pb - pa), s in [0, 1], clipped to the image with margin.
+    const Eigen::Vector2d d = pb - pa;
+    double s0 = 0, s1 = 1;
+    for (int k = 0; k < 2; ++k) {
+      if (d[k] == 0) {
+        if (pa[k] < lo[k] || pa[k] > hi[k]) s1 = -1;
+        continue;
       }
+      const double t0 = (lo[k] - pa[k]) / d[k], t1 = (hi[k] - pa[k]) / d[k];
+      s0 = std::max(s0, std::min(t0, t1));
+      s1 = std::min(s1, std::max(t0, t1));
+    }
+    if (!(s0 <= s1)) continue;  // off the image (or not finite)
+    // Pieces of at most 2 px, each piece's box grown by the band.
+    const double step = 2 / std::max(d.norm(), 2.0);
+    for (double s = s0; s <= s1; s += step) {
+      const Eigen::Vector2d q0 = pa + s * d, q1 = pa + std::min(s + step, s1) * d;
+      clear(std::min(q0.x(), q1.x()) - band, std::max(q0.x(), q1.x()) + band,
+            std::min(q0.y(), q1.y()) - band, std::max(q0.y(), q1.y()) + band);
     }
   }
 }
 
-void SubsampleShortcut::FindPierces(const Scene& scene, const SceneGeometry& geometry) {
-  if (pierces_found_ && pierces_version_ == geometry.Version()) return;
+namespace {
+
+// The segment in which triangles p and q meet (world frame); false when they do not meet in
+// one (apart, touching at a point, or coplanar).
+bool MeetingSegment(const std::array<Eigen::Vector3d, 3>& p,
+                    const std::array<Eigen::Vector3d, 3>& q, Eigen::Vector3d& a,
+                    Eigen::Vector3d& b) {
+  const Eigen::Vector3d np = (p[1] - p[0]).cross(p[2] - p[0]);
+  const Eigen::Vector3d nq = (q[1] - q[0]).cross(q[2] - q[0]);
+  const Eigen::Vector3d dir = np.cross(nq);
+  if (!(dir.squaredNorm() > 1e-24 * np.squaredNorm() * nq.squaredNorm())) return false;
+  // Where the edges of triangle t cross the plane (n, n . o): an interval along dir.
+  const auto interval = [&](const std::array<Eigen::Vector3d, 3>& t, const Eigen::Vector3d& n,
+                            const Eigen::Vector3d& o, Eigen::Vector3d& lo, Eigen::Vector3d& hi) {
+    bool any = false;
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d& u = t[k];
+      const Eigen::Vector3d& v = t[(k + 1) % 3];
+      const double du = n.dot(u - o), dv = n.dot(v - o);
+      if ((du > 0 && dv > 0) || (du < 0 && dv < 0) || du == dv) continue;
+      const Eigen::Vector3d x = u + du / (du - dv) * (v - u);
+      if (!any || dir.dot(x) < dir.dot(lo)) lo = x;
+      if (!any || dir.dot(x) > dir.dot(hi)) hi = x;
+      any = true;
+    }
+    return any;
+  };
+  Eigen::Vector3d p_lo, p_hi, q_lo, q_hi;
+  if (!interval(p, nq, q[0], p_lo, p_hi) || !interval(q, np, p[0], q_lo, q_hi)) return false;
+  a = dir.dot(p_lo) > dir.dot(q_lo) ? p_lo : q_lo;
+  b = dir.dot(p_hi) < dir.dot(q_hi) ? p_hi : q_hi;
+  return dir.dot(a) <= dir.dot(b);
+}
+
+}  // namespace
+
+void SubsampleShortcut::FindCrossings(const Scene& scene, const SceneGeometry& geometry) {
+  if (crossings_found_ && crossings_version_ == geometry.Version()) return;
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   const auto world = [&](unsigned o, int i) {
     const float* w = geometry.WorldVertices(o) + 3 * static_cast<std::size_t>(i);
     return Eigen::Vector3d(w[0], w[1], w[2]);
   };
-  const auto normal = [&](unsigned o, unsigned t) {
+  const auto corners = [&](unsigned o, unsigned t) {
     const Eigen::Vector3i& tri = scene.objects[o].triangles[t];
-    return Eigen::Vector3d(
-        (world(o, tri[1]) - world(o, tri[0])).cross(world(o, tri[2]) - world(o, tri[0])));
+    return std::array<Eigen::Vector3d, 3>{world(o, tri[0]), world(o, tri[1]), world(o, tri[2])};
   };
-  // Every crossing along an edge, ends excluded (the edge's own and adjacent triangles), of the
-  // objects `want`s: static ones, moving ones or any, into `out`.
+  // Every triangle an edge passes through, ends excluded, of the objects `want`s (static ones,
+  // moving ones or any): the segment where it meets each of the edge's triangles, into `out`.
+  // Triangles touching the edge's ends are its neighbours, not crossings (compared by position:
+  // a box's faces have their own vertices).
   enum class Want { kStatic, kMoving, kAny };
-  const auto cast_edge = [&](const Edge& edge, Want want, std::vector<Pierce>& out) {
+  const auto cast_edge = [&](const Edge& edge, Want want, std::vector<Segment>& out) {
     const Eigen::Vector3d a = world(edge.object, edge.a), b = world(edge.object, edge.b);
     const double length = (b - a).norm();
     if (!(length > 0)) return;
     const Eigen::Vector3d dir = (b - a) / length;
+    const double end_tolerance = 1e-6 * length;
     float t_near = static_cast<float>(1e-5 * length);
-    for (int k = 0; k < kMaxCrossingsPerEdge; ++k) {
+    for (int k = 0;; ++k) {
+      if (k == kMaxCrossingsPerEdge) {
+        crossings_overflow_ = true;
+        return;
+      }
       RTCRayHit rh;
       SetRay(rh, a.cast<float>(), dir.cast<float>(), t_near);
       rh.ray.tfar = static_cast<float>(length * (1 - 1e-5));
       rtcIntersect1(geometry.Handle(), &ctx, &rh);
       if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return;
-      t_near = rh.ray.tfar + static_cast<float>(1e-5 * length);
-      const unsigned g = rh.hit.geomID;
-      const Eigen::Vector3i& hit_tri = scene.objects[g].triangles[rh.hit.primID];
-      const bool adjacent = g == edge.object &&
-                            (hit_tri[0] == edge.a || hit_tri[1] == edge.a || hit_tri[2] == edge.a ||
-                             hit_tri[0] == edge.b || hit_tri[1] == edge.b || hit_tri[2] == edge.b);
-      const bool unwanted = want != Want::kAny && geometry.Dynamic(g) != (want == Want::kMoving);
-      if (adjacent || unwanted) continue;
-      const Eigen::Vector3d n_hit(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
-      Pierce pc;
-      pc.point = a + static_cast<double>(rh.ray.tfar) * dir;
-      pc.edge = dir;
-      pc.line1 = n_hit.cross(normal(edge.object, edge.t1));
-      if (edge.t2 != RTC_INVALID_GEOMETRY_ID) pc.line2 = n_hit.cross(normal(edge.object, edge.t2));
-      // Coplanar surfaces meet in no line: clear across the edge as well.
-      if (pc.line1.squaredNorm() == 0 && pc.line2.squaredNorm() == 0) {
-        pc.line1 = dir.unitOrthogonal();
+      t_near = std::nextafter(rh.ray.tfar, kInf);
+      const unsigned g = rh.hit.geomID, prim = rh.hit.primID;
+      if (want != Want::kAny && geometry.Dynamic(g) != (want == Want::kMoving)) continue;
+      const std::array<Eigen::Vector3d, 3> hit = corners(g, prim);
+      bool neighbour = false;
+      for (const Eigen::Vector3d& v : hit) {
+        neighbour = neighbour || (v - a).norm() <= end_tolerance || (v - b).norm() <= end_tolerance;
       }
-      out.push_back(pc);
+      if (neighbour) continue;
+      for (const unsigned t : edge.triangles) {
+        Segment seg;
+        if (t != kNoTriangle && MeetingSegment(corners(edge.object, t), hit, seg.a, seg.b)) {
+          out.push_back(seg);
+        }
+      }
     }
   };
-  if (!pierces_found_) {
+  crossings_overflow_ = false;
+  if (!crossings_found_) {
     // Static edges through static objects never change: found once.
     for (const Edge& edge : edges_) {
-      if (!geometry.Dynamic(edge.object)) cast_edge(edge, Want::kStatic, static_pierces_);
+      if (!geometry.Dynamic(edge.object)) cast_edge(edge, Want::kStatic, static_crossings_);
     }
+    static_overflow_ = crossings_overflow_;
   }
-  pierces_ = static_pierces_;
-  // Moving objects, at their current pose: every edge through one (a moving edge through a
-  // static object too), static edges only where they reach a moving object's bounding box.
+  crossings_overflow_ = static_overflow_;
+  crossings_ = static_crossings_;
+  // Moving objects, at their current pose: every edge of one, and static edges only where they
+  // reach a moving object's bounding box.
   std::vector<Eigen::AlignedBox3d> moving_boxes;
   for (std::size_t o = 0; o < scene.objects.size(); ++o) {
     if (!geometry.Dynamic(o)) continue;
@@ -517,7 +540,7 @@ void SubsampleShortcut::FindPierces(const Scene& scene, const SceneGeometry& geo
   if (!moving_boxes.empty()) {
     for (const Edge& edge : edges_) {
       if (geometry.Dynamic(edge.object)) {
-        cast_edge(edge, Want::kAny, pierces_);
+        cast_edge(edge, Want::kAny, crossings_);
         continue;
       }
       Eigen::AlignedBox3d span(world(edge.object, edge.a));
@@ -526,11 +549,11 @@ void SubsampleShortcut::FindPierces(const Scene& scene, const SceneGeometry& geo
       for (const Eigen::AlignedBox3d& box : moving_boxes) {
         near_moving = near_moving || box.intersects(span);
       }
-      if (near_moving) cast_edge(edge, Want::kMoving, pierces_);
+      if (near_moving) cast_edge(edge, Want::kMoving, crossings_);
     }
   }
-  pierces_version_ = geometry.Version();
-  pierces_found_ = true;
+  crossings_version_ = geometry.Version();
+  crossings_found_ = true;
 }
 
 std::size_t SubsampleShortcut::Fill(int r, RayBatch& b, std::vector<unsigned>& rest_at,

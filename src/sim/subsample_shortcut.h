@@ -17,9 +17,11 @@
 // every quad near a triangle's corner is cast too: the zone within which the triangle's image is
 // narrower than kCornerWidthPx (a sharp corner's zone runs far along its edges; a thin triangle
 // is all zone). That argument assumes that surfaces do not pass through each other: where they
-// do, a visible region can also end where an edge pierces another triangle, between the edge and
-// the line in which the two planes meet, so quads along both lines are cast near every such
-// point too (found with Embree along every edge, again whenever objects move). Frames then
+// do, a visible region can also be bounded by the segment in which two triangles meet, and end
+// away from every vertex; so every quad within corner_width_px_ of such a segment is cast too
+// (the segments come from the triangles that Embree finds along every edge, found again whenever
+// objects move; more than kMaxCrossingsPerEdge crossings on one edge cast the whole frame). Frames
+// then
 // differ from the exact ones (every subsample cast) by float rounding: Embree's t against the
 // closed form's, a few units in the last place. The zones use the pinhole part of the camera
 // model, grown by the lens distortion's largest displacement (and kCornerMarginPx) and widened by
@@ -64,9 +66,9 @@ class SubsampleShortcut {
   /// or two triangles of one convex planar quadrilateral (mates), or all miss. Needs every row's
   /// centres stored. Rows may run in parallel.
   void MarkQuads(int y0, int y1);
-  /// Clears the quads in every triangle corner's zone and along the lines where surfaces pass
-  /// through each other near the points edges pierce them (serial; after MarkQuads), the
-  /// triangles at their current pose seen from `camera_pose` (camera to world).
+  /// Clears the quads in every triangle corner's zone and along every segment where two
+  /// triangles pass through each other (serial; after MarkQuads), the triangles at their current
+  /// pose seen from `camera_pose` (camera to world).
   void ClearZones(const Scene& scene, const SceneGeometry& geometry,
                   const Eigen::Isometry3d& camera_pose);
 
@@ -96,27 +98,29 @@ class SubsampleShortcut {
   std::vector<std::size_t> object_first_;
   std::vector<std::array<unsigned, 3>> mates_;
 
-  // Every undirected edge of every object with its one or two triangles.
+  // Every undirected edge of every object with its triangles.
+  static constexpr unsigned kNoTriangle = ~0u;
   struct Edge {
     unsigned object;
-    int a, b;         // vertex indices
-    unsigned t1, t2;  // triangles; t2 = RTC_INVALID_GEOMETRY_ID for a border edge
+    int a, b;                         // vertex indices
+    std::vector<unsigned> triangles;  // one (a border), two, or more (non-manifold)
   };
   std::vector<Edge> edges_;
-  // Where an edge passes through another triangle (world frame): the point, the edge's direction
-  // and the lines in which the pierced triangle's plane meets the planes of the edge's triangles.
-  struct Pierce {
-    Eigen::Vector3d point, edge;
-    Eigen::Vector3d line1 = Eigen::Vector3d::Zero(), line2 = Eigen::Vector3d::Zero();
+  // Segments (world frame) in which two triangles meet, where surfaces pass through each other.
+  struct Segment {
+    Eigen::Vector3d a, b;
   };
-  std::vector<Pierce> pierces_;         // of the current pose
-  std::vector<Pierce> static_pierces_;  // between objects that never move
-  static constexpr int kMaxCrossingsPerEdge = 64;
-  unsigned long pierces_version_ = 0;  // SceneGeometry::Version() they were found at
-  bool pierces_found_ = false;
+  std::vector<Segment> crossings_;         // at the current pose
+  std::vector<Segment> static_crossings_;  // between objects that never move
+  std::uint64_t crossings_version_ = 0;    // SceneGeometry::Version() they were found at
+  bool crossings_found_ = false;
+  // More crossings on one edge than kMaxCrossingsPerEdge: not all were found, so the frame is
+  // cast without the shortcut.
+  bool crossings_overflow_ = false, static_overflow_ = false;
+  static constexpr int kMaxCrossingsPerEdge = 256;
 
   void BuildMates(const Scene& scene);
-  void FindPierces(const Scene& scene, const SceneGeometry& geometry);
+  void FindCrossings(const Scene& scene, const SceneGeometry& geometry);
   void ClearBox(double u0, double u1, double v0, double v1);
   [[nodiscard]] bool Mates(unsigned geom, unsigned p, unsigned q) const;
 };

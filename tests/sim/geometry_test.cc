@@ -85,8 +85,10 @@ TEST(GeometryTest, TraceFromAnOffsetLeavesTheOtherRaysAndReportsTheTriangle) {
     b.dx[i] = d.x();
     b.dy[i] = d.y();
     b.dz[i] = d.z();
-    b.t[i] = -1.f;  // sentinel
+    b.t[i] = -1.f;  // sentinels
     b.geom[i] = 77u;
+    b.prim[i] = 78u;
+    b.nx[i] = b.ny[i] = b.nz[i] = -2.f;
   }
   g.Trace(&ctx, {0, 0, 0}, n, b, first);
   std::set<unsigned> prims;
@@ -94,6 +96,9 @@ TEST(GeometryTest, TraceFromAnOffsetLeavesTheOtherRaysAndReportsTheTriangle) {
     if (i < first || i >= first + n) {
       EXPECT_EQ(b.t[i], -1.f) << i;
       EXPECT_EQ(b.geom[i], 77u) << i;
+      EXPECT_EQ(b.prim[i], 78u) << i;
+      EXPECT_EQ(b.nx[i], -2.f) << i;
+      EXPECT_EQ(b.nz[i], -2.f) << i;
       continue;
     }
     EXPECT_NEAR(b.t[i], 2.5f / b.dz[i], 1e-4f) << i;  // the front face at z = 2.5

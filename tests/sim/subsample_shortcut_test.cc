@@ -5,7 +5,7 @@
 // lies at a rounding boundary. A value that sits on a threshold (full well, a truth cause's
 // 5 cm / 1 cm limits) can flip instead; none does in these scenes on this machine, but Embree's
 // last bits differ between instruction sets, so up to kTieFraction of the pixels may (a count
-// of 2 at 160x124, 30 at 640x480). The truth distance (central rays, cast by Embree in both)
+// of 1 at 160x124, 30 at 640x480). The truth distance (central rays, cast by Embree in both)
 // must be bit for bit the same. Four scenes are built to defeat a shortcut that looked only at
 // the four pixel centres around a subsample: a pole thinner than a pixel, a cube smaller than a
 // pixel, the sharp corner of a large triangle and the sliver where a plate pokes out of a wall,
@@ -146,20 +146,26 @@ double YAt(double v, double z) {
 
 // A subsample of pixel (row, col) sees the object while none of the four pixel centres of its
 // quad, rows [row, row + 1] x columns [quad_col, quad_col + 1], does: their truth distance is the
-// bare wall's, and the pixel's registers differ from the bare wall's by more than 20 counts (far
+// bare scene's, and the pixel's registers differ from the bare scene's by more than 20 counts (far
 // beyond the one count of rounding; a surface seen edge-on returns little light, so a mixed
-// subsample may move a register by no more than about a hundred). The shortcut must then see the
-// object as the exact simulator does, to one count everywhere.
+// subsample may move a register by no more than about a hundred), in frame `premise_frame`. The
+// shortcut must then see the object as the exact simulator does, to one count everywhere, in
+// every frame up to that one.
 struct Premise {
   int row, col, quad_col;
 };
 
 void ExpectSeenLikeTheExactSimulator(const Scene& with, const std::string& what, Premise at,
-                                     const CameraModel& model = ResolveCameraModel("sr2")) {
-  SimulatedCamera bare_camera(WallWith(""), model, Noiseless(false));
+                                     const CameraModel& model = ResolveCameraModel("sr2"),
+                                     const Scene& bare_scene = WallWith(""),
+                                     int premise_frame = 0) {
+  SimulatedCamera bare_camera(bare_scene, model, Noiseless(false));
   SimulatedCamera exact_camera(with, model, Noiseless(false));
-  const Frame bare = *bare_camera.Grab();
-  const Frame exact = *exact_camera.Grab();
+  Frame bare, exact;
+  for (int f = 0; f <= premise_frame; ++f) {
+    bare = *bare_camera.Grab();
+    exact = *exact_camera.Grab();
+  }
   for (int r = at.row; r <= at.row + 1; ++r) {
     for (int c = at.quad_col; c <= at.quad_col + 1; ++c) {
       ASSERT_EQ(exact.truth->radial_distance_m(r, c), bare.truth->radial_distance_m(r, c))
@@ -172,7 +178,7 @@ void ExpectSeenLikeTheExactSimulator(const Scene& with, const std::string& what,
                std::abs(exact.amplitude(at.row, at.col) - bare.amplitude(at.row, at.col)));
   ASSERT_GT(moved, 20) << what << ": no subsample of the pixel sees it (" << moved
                        << " counts); the case tests nothing";
-  ExpectSameFrames(with, model, Noiseless(false), 1, what, /*allow_ties=*/false);
+  ExpectSameFrames(with, model, Noiseless(false), premise_frame + 1, what, /*allow_ties=*/false);
 }
 
 TEST(SubsampleShortcutTest, APoleThinnerThanAPixelBetweenPixelCentres) {
@@ -236,19 +242,13 @@ TEST(SubsampleShortcutTest, TheSharpCornerOfALargeTriangle) {
   ExpectSeenLikeTheExactSimulator(scene, "a 4-degree corner", {60, 91, 90});
 }
 
-TEST(SubsampleShortcutTest, TheSliverWhereAPlatePokesOutOfAWall) {
-  // A triangle (image corners (80, 60.35), (104, 60.35), (92, 54)) passes through the wall at
-  // z = 3 m: its plane, 1/z = 1/3 + 0.04 [(v - 60.35) - 0.07 (u - 94.5)] per metre, meets the
-  // wall in a line that leaves its lower edge (row 60.35) at column 94.5 at 4 degrees. The
-  // triangle is in front of the wall only in the thin wedge between that line and the edge,
-  // left of column 94.5: at column 90 and beyond it lies between the centres of rows 60 and 61,
-  // yet it covers the subsample at (90.75, 60.25), 6 cm in front of the wall. No vertex is near
-  // (the corner zones end at columns 86 and 98): only the zone around the point where the edge
-  // pierces the wall covers that quad.
-  Scene scene = WallWith("");
+// A triangle with image corners (80, 60.35), (104, 60.35), (92, 54) whose plane,
+// 1/z = 1/3 + 0.04 [(v - 60.35) - slope (u - 94.5)] per metre, meets the wall (z = 3 m) in a
+// line that leaves the triangle's lower edge (row 60.35) at column 94.5, `slope` rows per column.
+SceneObject Plate(double slope) {
   const CameraIntrinsics in = ResolveCameraModel("sr2").intrinsics;
   const auto point = [&](double u, double v) {
-    const double z = 1 / (1.0 / 3 + 0.04 * ((v - 60.35) - 0.07 * (u - 94.5)));
+    const double z = 1 / (1.0 / 3 + 0.04 * ((v - 60.35) - slope * (u - 94.5)));
     return Eigen::Vector3f(static_cast<float>((u - in.cx_px) * z / in.fx_px),
                            static_cast<float>((v - in.cy_px) * z / in.fy_px),
                            static_cast<float>(z));
@@ -258,17 +258,53 @@ TEST(SubsampleShortcutTest, TheSliverWhereAPlatePokesOutOfAWall) {
   plate.material = 0;
   plate.vertices = {point(80, 60.35), point(104, 60.35), point(92, 54)};
   plate.triangles = {Eigen::Vector3i(0, 1, 2)};
-  Scene moving = scene;
-  scene.objects.push_back(plate);
+  return plate;
+}
+
+TEST(SubsampleShortcutTest, TheSliverWhereAPlatePokesOutOfAWall) {
+  // The plate meets the wall at 4 degrees: it is in front of the wall only in the thin wedge
+  // between the meeting line and its lower edge, left of column 94.5. At column 90 and beyond
+  // the wedge lies between the centres of rows 60 and 61, yet it covers the subsample at
+  // (90.75, 60.25), 6 cm in front of the wall. No vertex is near (the corner zones end at
+  // columns 86 and 98): only the band along the segment where the two surfaces meet covers it.
+  Scene scene = WallWith("");
+  scene.objects.push_back(Plate(0.07));
   ExpectSeenLikeTheExactSimulator(scene, "a plate poking out of the wall", {60, 91, 90});
-  // The same plate as a moving object (a micrometre in 1000 s: its pose changes every frame, its
-  // vertices do not), whose crossings are found again at every pose.
-  Keyframe later;
-  later.time_s = 1000.0;
-  later.position_m = Eigen::Vector3d(0, 0, 1e-6);
-  plate.motion.keys = {Keyframe{}, later};
-  moving.objects.push_back(plate);
-  ExpectSeenLikeTheExactSimulator(moving, "a moving plate poking out of the wall", {60, 91, 90});
+}
+
+TEST(SubsampleShortcutTest, TheSliverWhereAPlatePokesOutOfAWallThatEndsFirst) {
+  // The same at 2 degrees, but the wall (a second one 3 m further back) ends at column 94,
+  // before the plate's lower edge reaches the wall's plane: no edge of the plate pierces the
+  // wall near the wedge's tip (the wall's border pierces the plate instead). The subsample at
+  // (86.75, 60.25) of pixel (60, 87) sees the plate; the centres of columns 86 and 87 do not.
+  const double right_m = (94 - 79.5) * 3 / ResolveCameraModel("sr2").intrinsics.fx_px;
+  const std::string walls =
+      "materials: {w: {albedo: 0.8}}\nobjects:\n"
+      "  - {type: plane, material: w, size_m: [10, 10], position_m: [" +
+      std::to_string(right_m - 5) +
+      ", 0, 3]}\n"
+      "  - {type: plane, material: w, size_m: [20, 20], position_m: [0, 0, 6]}\n";
+  const Scene bare = ParseScene(walls, "inline", {});
+  Scene scene = bare;
+  scene.objects.push_back(Plate(0.035));
+  ExpectSeenLikeTheExactSimulator(scene, "a plate poking out of a wall that ends first",
+                                  {60, 87, 86}, ResolveCameraModel("sr2"), bare);
+}
+
+TEST(SubsampleShortcutTest, TheSliverOfAMovingPlateFollowsIt) {
+  // The first plate as a moving object: 5 m to the right (out of view, through nothing) for the
+  // first frame, then moved into place between 40 and 50 ms, so frames 2 and 3 see the wedge.
+  // Where surfaces meet is found again whenever objects move; found once, it would be stale.
+  Scene scene = WallWith("");
+  SceneObject plate = Plate(0.07);
+  Keyframe away, still_away, in_place;
+  away.position_m = still_away.position_m = Eigen::Vector3d(5, 0, 0);
+  still_away.time_s = 0.04;
+  in_place.time_s = 0.05;
+  plate.motion.keys = {away, still_away, in_place};
+  scene.objects.push_back(plate);
+  ExpectSeenLikeTheExactSimulator(scene, "a plate that moves into the wall", {60, 91, 90},
+                                  ResolveCameraModel("sr2"), WallWith(""), 3);
 }
 
 }  // namespace

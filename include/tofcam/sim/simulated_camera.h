@@ -52,14 +52,14 @@ struct SimulatorOptions {
   /// The planar shortcut: Embree casts each pixel's central ray; a subsample ray whose four
   /// surrounding pixel centres hit one triangle (or two coplanar halves of one convex
   /// quadrilateral) is cast on that plane in closed form, the rest by Embree, and so is every
-  /// subsample near a triangle's corner or near where an edge pierces another surface (where a
+  /// subsample near a triangle's corner or near where two surfaces pass through each other (where a
   /// surface can hide between pixel centres). Frames equal the exact ones up to float rounding:
   /// with the noise off a register differs by at most one count, except where a value sits on a
   /// threshold (saturation, a truth cause, a mirror bounce grazing an edge); the truth distance
   /// is bit for bit the same, the truth sigma and footprint up to rounding. With noise, a
   /// rounding difference can change how many random numbers a dark pixel's Poisson draw takes,
   /// so the rest of that row draws other (equally distributed) noise. 1.3-1.45x faster frames
-  /// for a moving camera among large surfaces with 2x2 supersampling; slower (by 10-15 %) for a
+  /// for a moving camera among large surfaces with 2x2 supersampling; slower (by 3-8 %) for a
   /// static camera on a moving, finely tessellated object (docs/simulator.md "The planar
   /// shortcut"); no effect at S = 1. Off by default, so that the documented experiments
   /// reproduce bit for bit.
