@@ -28,9 +28,6 @@ struct Vec {
   typedef T type __attribute__((vector_size(sizeof(T) * N)));
 };
 
-// GCC's auto-vectoriser leaves this loop scalar once it has unrolled the G lanes, so the lanes
-// are written as GCC/Clang vector extensions: G floats per operation, the same IEEE operations
-// as the scalar form in every lane.
 // One pixel per block (S^2 does not divide the packet): plain scalar lanes.
 inline void ClosedFormLanes(int width, int s2, const int* qoff, int center_s, const std::uint8_t* q,
                             const RowHits& r) {
@@ -53,6 +50,9 @@ inline void ClosedFormLanes(int width, int s2, const int* qoff, int center_s, co
   }
 }
 
+// GCC's auto-vectoriser leaves this loop scalar once it has unrolled the G lanes, so the lanes
+// are written as GCC/Clang vector extensions: G floats per operation, the same IEEE operations
+// as the scalar form in every lane.
 template <int G>
 [[gnu::always_inline]] inline void ClosedFormBlocks(int width, int s2, const int* qoff,
                                                     int center_s, const std::uint8_t* q,
@@ -151,7 +151,7 @@ int ClipNear(const std::array<Eigen::Vector3d, 3>& v, std::array<Eigen::Vector3d
 SubsampleShortcut::SubsampleShortcut(const Scene& scene, const CameraModel& model,
                                      const PixelRays& rays)
     : width_(rays.width), height_(rays.height), s2_(rays.ss * rays.ss) {
-  BuildMates(scene);
+  BuildEdgesAndMates(scene);
   const CameraIntrinsics& in = model.intrinsics;
   fx_ = in.fx_px;
   fy_ = in.fy_px;
@@ -208,7 +208,7 @@ SubsampleShortcut::SubsampleShortcut(const Scene& scene, const CameraModel& mode
   quad_ok_.assign(static_cast<std::size_t>(width_ + 1) * (height_ + 1), 0);
 }
 
-void SubsampleShortcut::BuildMates(const Scene& scene) {
+void SubsampleShortcut::BuildEdgesAndMates(const Scene& scene) {
   constexpr unsigned kNone = RTC_INVALID_GEOMETRY_ID;
   std::size_t total = 0;
   object_first_.resize(scene.objects.size());

@@ -119,7 +119,8 @@ class SubsampleShortcut {
   bool crossings_overflow_ = false, static_overflow_ = false;
   static constexpr int kMaxCrossingsPerEdge = 256;
 
-  void BuildMates(const Scene& scene);
+  // edges_ and mates_ from the scene's meshes (object frames: both survive rigid motion).
+  void BuildEdgesAndMates(const Scene& scene);
   void FindCrossings(const Scene& scene, const SceneGeometry& geometry);
   void ClearBox(double u0, double u1, double v0, double v1);
   [[nodiscard]] bool Mates(unsigned geom, unsigned p, unsigned q) const;
