@@ -46,3 +46,29 @@ void BM_MakePanViewInto(benchmark::State& state) {
 BENCHMARK(BM_MakePanViewInto)->Apply(tofcam::bench::Resolutions)->Unit(benchmark::kMillisecond);
 
 }  // namespace
+
+namespace {
+// The VGA frames on strips of other cell sizes (argument: hundredths of a degree): from about one
+// point per cell (0.2°) to about 100 (2°), where the splat's two forms (coarse and fine) trade.
+void BM_MakePanViewIntoStrip(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Simulated(640, 480);
+  const std::vector<tofcam::MetricFrame> frames = PanFrames(in);
+  tofcam::PanViewOptions o;
+  o.resolution_deg = static_cast<double>(state.range(0)) / 100.0;
+  tofcam::PanView view;
+  for (auto _ : state) {
+    tofcam::MakePanViewInto(frames, in.rays, o, view);
+    benchmark::DoNotOptimize(view.panorama.data());
+  }
+  state.SetItemsProcessed(state.iterations() * 5 * 640 * 480);
+  state.counters["points_per_cell"] = 5.0 * 640 * 480 / static_cast<double>(view.panorama.size());
+}
+BENCHMARK(BM_MakePanViewIntoStrip)
+    ->Arg(20)
+    ->Arg(35)
+    ->Arg(50)
+    ->Arg(70)
+    ->Arg(100)
+    ->Arg(200)
+    ->Unit(benchmark::kMillisecond);
+}  // namespace

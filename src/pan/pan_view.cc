@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "../core/avx512_forms.h"
 #include "../core/fast_atan2.h"
 #include "../filters/hot_loop.h"
 #include "../pipeline/stage_kernels.h"
@@ -16,6 +17,10 @@
 #include "tofcam/core/error.h"
 #include "tofcam/core/pixel_flags.h"
 #include "tofcam/core/units.h"
+
+#if defined(TOFCAM_AVX512_FORMS)
+#include <immintrin.h>
+#endif
 
 namespace tofcam {
 namespace {
@@ -117,6 +122,218 @@ TOFCAM_HOT_LOOP_WIDE void FastCells(std::size_t n, const FloatStrip& s, const fl
   }
 }
 
+#if defined(TOFCAM_AVX512_FORMS)
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
+// FastCells' constants, broadcast once per call of an AVX-512 form.
+struct CellConsts {
+  __m512 f0, f1, f2, l0, l1, l2, u0, u1, u2;
+  __m512 max_az, max_tan, inv_res, cols, rows, ec, er, cut;
+  __m512i stride;
+};
+TOFCAM_AVX512_INLINE CellConsts BroadcastStrip(const FloatStrip& k) {
+  CellConsts c;
+  c.f0 = _mm512_set1_ps(k.f0);
+  c.f1 = _mm512_set1_ps(k.f1);
+  c.f2 = _mm512_set1_ps(k.f2);
+  c.l0 = _mm512_set1_ps(k.l0);
+  c.l1 = _mm512_set1_ps(k.l1);
+  c.l2 = _mm512_set1_ps(k.l2);
+  c.u0 = _mm512_set1_ps(k.u0);
+  c.u1 = _mm512_set1_ps(k.u1);
+  c.u2 = _mm512_set1_ps(k.u2);
+  c.max_az = _mm512_set1_ps(k.max_az);
+  c.max_tan = _mm512_set1_ps(k.max_tan);
+  c.inv_res = _mm512_set1_ps(k.inv_res);
+  c.cols = _mm512_set1_ps(k.cols);
+  c.rows = _mm512_set1_ps(k.rows);
+  c.ec = _mm512_set1_ps(k.ec);
+  c.er = _mm512_set1_ps(k.er);
+  c.cut = _mm512_set1_ps(k.cut);
+  c.stride = _mm512_set1_epi32(static_cast<std::int32_t>(k.cols));
+  return c;
+}
+
+// FastCells for 16 points with AVX-512 intrinsics: the same geometry and tests, with fused
+// multiply-adds (one rounding where FastCells has two, so every error bound above still holds
+// and the cells after the recheck are the same) and the tests' logic in mask registers (GCC's
+// clone of FastCells moved it to general registers and back, and spilled). Lanes not in `ok`
+// get kNoCell; `undecided` receives the ok lanes left to ExactCell (kRecheckCell).
+TOFCAM_AVX512_INLINE __m512i Cells16(const CellConsts& k, __m512 px, __m512 py, __m512 pz,
+                                     __mmask16 ok, __mmask16& undecided) {
+  const __m512 zero = _mm512_setzero_ps();
+  constexpr float kPiF = static_cast<float>(kPi);
+  const __m512 pf = _mm512_fmadd_ps(pz, k.f2, _mm512_fmadd_ps(py, k.f1, _mm512_mul_ps(px, k.f0)));
+  const __m512 pl = _mm512_fmadd_ps(pz, k.l2, _mm512_fmadd_ps(py, k.l1, _mm512_mul_ps(px, k.l0)));
+  const __m512 pu = _mm512_fmadd_ps(pz, k.u2, _mm512_fmadd_ps(py, k.u1, _mm512_mul_ps(px, k.u0)));
+  const __m512 rho = _mm512_sqrt_ps(_mm512_fmadd_ps(pf, pf, _mm512_mul_ps(pl, pl)));
+  const __m512 tan_el = _mm512_div_ps(pu, _mm512_max_ps(rho, _mm512_set1_ps(1e-6f)));
+  // FastAtan2F(pl, pf).
+  const __m512 ax = _mm512_abs_ps(pf), ay = _mm512_abs_ps(pl);
+  const __m512 hi = _mm512_max_ps(ax, ay), lo = _mm512_min_ps(ax, ay);
+  const __mmask16 reduce = _mm512_cmp_ps_mask(
+      lo, _mm512_mul_ps(_mm512_set1_ps(0.41421356237309504880f), hi), _CMP_GT_OQ);
+  const __m512 num = _mm512_mask_sub_ps(lo, reduce, lo, hi);
+  const __m512 den = _mm512_max_ps(_mm512_mask_add_ps(hi, reduce, lo, hi), _mm512_set1_ps(1e-30f));
+  const __m512 u = _mm512_div_ps(num, den);
+  const __m512 uu = _mm512_mul_ps(u, u);
+  __m512 poly = _mm512_set1_ps(-1.0f / 15);
+  for (const float c : {1.0f / 13, -1.0f / 11, 1.0f / 9, -1.0f / 7, 1.0f / 5, -1.0f / 3, 1.0f}) {
+    poly = _mm512_fmadd_ps(poly, uu, _mm512_set1_ps(c));
+  }
+  __m512 a = _mm512_fmadd_ps(u, poly, _mm512_maskz_mov_ps(reduce, _mm512_set1_ps(kPiF / 4)));
+  a = _mm512_mask_sub_ps(a, _mm512_cmp_ps_mask(ay, ax, _CMP_GT_OQ), _mm512_set1_ps(kPiF / 2), a);
+  a = _mm512_mask_sub_ps(a, _mm512_cmp_ps_mask(pf, zero, _CMP_LT_OQ), _mm512_set1_ps(kPiF), a);
+  a = _mm512_mask_xor_ps(a, _mm512_cmp_ps_mask(pl, zero, _CMP_LT_OQ), a,
+                         _mm512_castsi512_ps(_mm512_set1_epi32(INT32_MIN)));
+  // The cell interval and its tests, as FastCells.
+  const __m512 col = _mm512_mul_ps(_mm512_sub_ps(k.max_az, a), k.inv_res);
+  const __m512 row = _mm512_mul_ps(_mm512_sub_ps(k.max_tan, tan_el), k.inv_res);
+  const __m512 c_lo = _mm512_sub_ps(col, k.ec), c_hi = _mm512_add_ps(col, k.ec);
+  const __m512 r_lo = _mm512_sub_ps(row, k.er), r_hi = _mm512_add_ps(row, k.er);
+  __mmask16 inside = _mm512_cmp_ps_mask(c_lo, zero, _CMP_GE_OQ);
+  inside = _mm512_mask_cmp_ps_mask(inside, c_hi, k.cols, _CMP_LT_OQ);
+  inside = _mm512_mask_cmp_ps_mask(inside, r_lo, zero, _CMP_GE_OQ);
+  inside = _mm512_mask_cmp_ps_mask(inside, r_hi, k.rows, _CMP_LT_OQ);
+  const __mmask16 outside =
+      _mm512_cmp_ps_mask(c_hi, zero, _CMP_LT_OQ) | _mm512_cmp_ps_mask(c_lo, k.cols, _CMP_GE_OQ) |
+      _mm512_cmp_ps_mask(r_hi, zero, _CMP_LT_OQ) | _mm512_cmp_ps_mask(r_lo, k.rows, _CMP_GE_OQ);
+  __mmask16 plain = _mm512_cmp_ps_mask(rho, _mm512_set1_ps(2e-6f), _CMP_GE_OQ);
+  plain = _mm512_mask_cmp_ps_mask(plain, rho, _mm512_set1_ps(1e18f), _CMP_LE_OQ);
+  plain = _mm512_mask_cmp_ps_mask(plain, _mm512_abs_ps(tan_el), _mm512_set1_ps(1e4f), _CMP_LE_OQ);
+  plain &= _mm512_cmp_ps_mask(pf, zero, _CMP_GE_OQ) |
+           _mm512_cmp_ps_mask(ay, _mm512_mul_ps(k.cut, rho), _CMP_GT_OQ);
+  // Inside the strip the truncations are floors (other lanes' values are not used).
+  const __m512i c0 = _mm512_cvttps_epi32(c_lo), c1 = _mm512_cvttps_epi32(c_hi);
+  const __m512i r0 = _mm512_cvttps_epi32(r_lo), r1 = _mm512_cvttps_epi32(r_hi);
+  __mmask16 in = plain & inside & ok;
+  in = _mm512_mask_cmpeq_epi32_mask(in, c0, c1);
+  in = _mm512_mask_cmpeq_epi32_mask(in, r0, r1);
+  const __mmask16 out = (plain & outside) | static_cast<__mmask16>(~ok);
+  undecided = static_cast<__mmask16>(ok & ~(in | out));
+  // in: the cell; certainly out or not ok: kNoCell; otherwise kRecheckCell.
+  const __m512i c = _mm512_mask_mov_epi32(_mm512_set1_epi32(internal::kRecheckCell), out,
+                                          _mm512_set1_epi32(internal::kNoCell));
+  return _mm512_mask_add_epi32(c, in, _mm512_mullo_epi32(r0, k.stride), c0);
+}
+
+// The lanes of a block of 16 that exist (the last block of n may be partial).
+TOFCAM_AVX512_INLINE __mmask16 Lanes(std::size_t n, std::size_t i) {
+  return n - i >= 16 ? __mmask16{0xffff} : static_cast<__mmask16>((1u << (n - i)) - 1u);
+}
+
+// FastCells and MaskInvalid in one pass (Cells16). Returns how many valid points are left to
+// recheck.
+TOFCAM_AVX512_TARGET std::uint32_t FastCellsAvx512(std::size_t n, const FloatStrip& strip,
+                                                   const float* __restrict x,
+                                                   const float* __restrict y,
+                                                   const float* __restrict z,
+                                                   const std::uint8_t* __restrict valid,
+                                                   std::int32_t* __restrict cell) {
+  const CellConsts k = BroadcastStrip(strip);
+  std::uint32_t rechecks = 0;
+  for (std::size_t i = 0; i < n; i += 16) {
+    const __mmask16 lanes = Lanes(n, i);
+    const __m128i vb = _mm_maskz_loadu_epi8(lanes, valid + i);
+    __mmask16 undecided;
+    const __m512i c =
+        Cells16(k, _mm512_maskz_loadu_ps(lanes, x + i), _mm512_maskz_loadu_ps(lanes, y + i),
+                _mm512_maskz_loadu_ps(lanes, z + i), _mm_test_epi8_mask(vb, vb), undecided);
+    _mm512_mask_storeu_epi32(cell + i, lanes, c);
+    rechecks += static_cast<std::uint32_t>(__builtin_popcount(undecided));
+  }
+  return rechecks;
+}
+
+// One base-frame coordinate, ((ra x + rb y) + rc z) + tr, in BasePoints' order.
+TOFCAM_AVX512_INLINE __m512 RotateAxis(__m512 ra, __m512 rb, __m512 rc, __m512 tr, __m512 x,
+                                       __m512 y, __m512 z) {
+  return _mm512_add_ps(_mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(ra, x), _mm512_mul_ps(rb, y)),
+                                     _mm512_mul_ps(rc, z)),
+                       tr);
+}
+
+// BasePoints, FastCells, MaskInvalid and SplatInputs in one pass for one chunk: the base points
+// (the same operations as BasePoints, in its order: the file is built without contraction, and
+// these are separate multiplies and adds), their validity, and for the splat each point's key
+// (its range2 where it has or may have a cell, +inf where it certainly has none), distance and
+// amplitude word, and cell (0 where none; kRecheckCell where ExactCell must decide). Returns how
+// many points are left to recheck.
+TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
+    std::size_t n, const float* __restrict d, const std::uint16_t* __restrict flags,
+    std::uint16_t nan_mask, const float* __restrict a, const float* __restrict rx,
+    const float* __restrict ry, const float* __restrict rz, const float* __restrict r,
+    const float* __restrict t, const FloatStrip& strip, float* __restrict bx, float* __restrict by,
+    float* __restrict bz, std::uint8_t* __restrict valid, double* __restrict key,
+    std::uint64_t* __restrict da, std::int32_t* __restrict cell) {
+  const CellConsts k = BroadcastStrip(strip);
+  __m512 rot[9];
+  for (int j = 0; j < 9; ++j) rot[j] = _mm512_set1_ps(r[j]);
+  const __m512 t0 = _mm512_set1_ps(t[0]), t1 = _mm512_set1_ps(t[1]), t2 = _mm512_set1_ps(t[2]);
+  const __m512 max = _mm512_set1_ps(std::numeric_limits<float>::max());
+  const __m512 nan = _mm512_set1_ps(kNan);
+  const __m256i nan_bits = _mm256_set1_epi16(static_cast<std::int16_t>(nan_mask));
+  const __m256i reject_bits = _mm256_set1_epi16(static_cast<std::int16_t>(kRejectMask));
+  const __m512d inf = _mm512_set1_pd(std::numeric_limits<double>::infinity());
+  const __m512i interleave_lo =
+      _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+  const __m512i interleave_hi =
+      _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
+  std::uint32_t rechecks = 0;
+  for (std::size_t i = 0; i < n; i += 16) {
+    const __mmask16 lanes = Lanes(n, i);
+    const __m512 di = _mm512_maskz_loadu_ps(lanes, d + i);
+    const __m256i f = _mm256_maskz_loadu_epi16(lanes, flags + i);
+    const __mmask16 keep = _mm256_testn_epi16_mask(f, nan_bits) &
+                           _mm512_cmp_ps_mask(_mm512_abs_ps(di), max, _CMP_LE_OQ);
+    const __m512 dk = _mm512_mask_mov_ps(nan, keep, di);
+    const __m512 x = _mm512_mul_ps(dk, _mm512_maskz_loadu_ps(lanes, rx + i));
+    const __m512 y = _mm512_mul_ps(dk, _mm512_maskz_loadu_ps(lanes, ry + i));
+    const __m512 z = _mm512_mul_ps(dk, _mm512_maskz_loadu_ps(lanes, rz + i));
+    const __m512 px = RotateAxis(rot[0], rot[3], rot[6], t0, x, y, z);
+    const __m512 py = RotateAxis(rot[1], rot[4], rot[7], t1, x, y, z);
+    const __m512 pz = RotateAxis(rot[2], rot[5], rot[8], t2, x, y, z);
+    _mm512_mask_storeu_ps(bx + i, lanes, px);
+    _mm512_mask_storeu_ps(by + i, lanes, py);
+    _mm512_mask_storeu_ps(bz + i, lanes, pz);
+    __mmask16 ok = _mm256_testn_epi16_mask(f, reject_bits);
+    ok = _mm512_mask_cmp_ps_mask(ok, _mm512_abs_ps(px), max, _CMP_LE_OQ);
+    ok = _mm512_mask_cmp_ps_mask(ok, _mm512_abs_ps(py), max, _CMP_LE_OQ);
+    ok = _mm512_mask_cmp_ps_mask(ok, _mm512_abs_ps(pz), max, _CMP_LE_OQ);
+    ok &= lanes;
+    _mm_mask_storeu_epi8(valid + i, lanes, _mm_maskz_set1_epi8(ok, 1));
+    __mmask16 undecided;
+    const __m512i c = Cells16(k, px, py, pz, ok, undecided);
+    // Lanes that may have a cell: in one (c >= 0) or undecided.
+    const __mmask16 may = _mm512_cmpge_epi32_mask(c, _mm512_setzero_si512()) | undecided;
+    _mm512_mask_storeu_epi32(cell + i, lanes, _mm512_maskz_mov_epi32(may, c));
+    // range2 in double, as BasePoints: ((dx dx + dy dy) + dz dz), each square exact.
+    for (int h = 0; h < 2; ++h) {
+      const __mmask8 mh = static_cast<__mmask8>(may >> (8 * h));
+      const __mmask8 lh = static_cast<__mmask8>(lanes >> (8 * h));
+      const __m512d dx =
+          _mm512_cvtps_pd(h == 0 ? _mm512_castps512_ps256(px) : _mm512_extractf32x8_ps(px, 1));
+      const __m512d dy =
+          _mm512_cvtps_pd(h == 0 ? _mm512_castps512_ps256(py) : _mm512_extractf32x8_ps(py, 1));
+      const __m512d dz =
+          _mm512_cvtps_pd(h == 0 ? _mm512_castps512_ps256(pz) : _mm512_extractf32x8_ps(pz, 1));
+      const __m512d r2 = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
+                                       _mm512_mul_pd(dz, dz));
+      _mm512_mask_storeu_pd(key + i + 8 * h, lh, _mm512_mask_mov_pd(inf, mh, r2));
+    }
+    // Distance and amplitude words: d in the low half, a in the high half.
+    const __m512i db = _mm512_castps_si512(di);
+    const __m512i ab = _mm512_castps_si512(_mm512_maskz_loadu_ps(lanes, a + i));
+    _mm512_mask_storeu_epi64(da + i, static_cast<__mmask8>(lanes),
+                             _mm512_permutex2var_epi32(db, interleave_lo, ab));
+    _mm512_mask_storeu_epi64(da + i + 8, static_cast<__mmask8>(lanes >> 8),
+                             _mm512_permutex2var_epi32(db, interleave_hi, ab));
+    rechecks += static_cast<std::uint32_t>(__builtin_popcount(undecided));
+  }
+  return rechecks;
+}
+TOFCAM_AVX512_DIAGNOSTICS_END
+#endif
+
 // Invalid points get kNoCell; returns how many valid ones FastCells left to recheck. Apart from
 // FastCells: with bytes in its loop GCC would unroll it four vectors deep and spill.
 TOFCAM_HOT_LOOP std::uint32_t MaskInvalid(std::size_t n, const std::uint8_t* __restrict valid,
@@ -147,6 +364,62 @@ TOFCAM_HOT_LOOP std::size_t NextRecheckBlock(std::size_t i0, std::size_t n,
     if ((w[0] | w[1] | w[2] | w[3]) != 0) break;
   }
   return i0;
+}
+
+// The float strip of FastCells with its error bounds (see FastCells).
+FloatStrip ToFloatStrip(const internal::PanStrip& s) {
+  FloatStrip f{};
+  f.f0 = static_cast<float>(s.forward[0]);
+  f.f1 = static_cast<float>(s.forward[1]);
+  f.f2 = static_cast<float>(s.forward[2]);
+  f.l0 = static_cast<float>(s.left[0]);
+  f.l1 = static_cast<float>(s.left[1]);
+  f.l2 = static_cast<float>(s.left[2]);
+  f.u0 = static_cast<float>(s.up[0]);
+  f.u1 = static_cast<float>(s.up[1]);
+  f.u2 = static_cast<float>(s.up[2]);
+  f.max_az = static_cast<float>(s.max_azimuth_rad);
+  f.max_tan = static_cast<float>(s.max_tan_elevation);
+  f.inv_res = static_cast<float>(s.inv_resolution);
+  f.cols = static_cast<float>(s.cols);
+  f.rows = static_cast<float>(s.rows);
+  constexpr double kE = 0x1p-24;
+  const double inv_res = s.inv_resolution, max_tan = std::abs(s.max_tan_elevation);
+  const double q_max = 1.0 + max_tan + 1.0 / inv_res + 1e-3;
+  f.ec = static_cast<float>(
+      2.0 * (inv_res * (1e-6 + kE * (6.0 * q_max + 10.0)) + 3.0 * kE * (s.cols + 1.0)));
+  f.er = static_cast<float>(
+      2.0 * (inv_res * kE * (16.0 * q_max * q_max + 2.0 * max_tan) + 3.0 * kE * (s.rows + 1.0)));
+  f.cut = static_cast<float>(16.0 * kE * q_max);
+  return f;
+}
+
+// Calls on_exact(i, ExactCell(point i)) for each of the `rechecks` points whose cell is
+// kRecheckCell. A few per mille of the points (0.3 % at SR-2 on the default strip): blocks of 64
+// cells without one are skipped with vector compares (NextRecheckBlock).
+template <typename OnExact>
+void RecheckCells(std::size_t n, const internal::PanStrip& s, const float* x, const float* y,
+                  const float* z, std::size_t rechecks, const std::int32_t* cell,
+                  OnExact on_exact) {
+  using internal::ExactCell;
+  using internal::kRecheckCell;
+  std::size_t left = rechecks;
+  std::size_t i0 = 0;
+  while (left > 0) {
+    i0 = NextRecheckBlock(i0, n, cell);
+    if (i0 + 64 > n) break;
+    for (std::size_t i = i0; i < i0 + 64; ++i) {
+      if (cell[i] != kRecheckCell) continue;
+      on_exact(i, ExactCell(s, x[i], y[i], z[i]));
+      --left;
+    }
+    i0 += 64;
+  }
+  for (std::size_t i = i0; left > 0 && i < n; ++i) {
+    if (cell[i] != kRecheckCell) continue;
+    on_exact(i, ExactCell(s, x[i], y[i], z[i]));
+    --left;
+  }
 }
 
 // Reused buffers of MakePanView: per chunk, except the stand-ins for missing channels (per frame).
@@ -301,12 +574,18 @@ TOFCAM_HOT_LOOP_WIDE void SplatInputs(std::size_t n, std::int32_t* __restrict ce
 }
 
 // Splat: the point nearest to the rotation centre wins its cell (the first of equals). Two
-// forms with the same result. Coarse pixels (fewer points than cells, e.g. SR-2 frames on the
-// default 0.5° strip): every point rewrites its 16-byte cell branch-free, since neighbouring
-// points compete for different cells in an order no branch predictor learns (points without a
-// cell rewrite cell 0 with its own value: their key +inf never wins). Fine pixels (several
-// points per cell): runs of points hit one cell and rarely win it, so a branch predicts well,
-// while rewriting the cell every time would chain each point on the previous one's store.
+// forms with the same result. Coarse pixels (up to kBranchFreePointsPerCell points of a frame
+// per cell of the strip, e.g. SR-2 and VGA frames on the default 0.5° strip): every point
+// rewrites its 16-byte cell branch-free, since neighbouring points compete for cells in an
+// order no branch predictor learns (points without a cell rewrite cell 0 with its own value:
+// their key +inf never wins). Fine pixels (more points per cell): runs of points hit one cell
+// and rarely win it, so a branch predicts well, while rewriting the cell every time would chain
+// each point on the previous one's store.
+// Where the two forms trade, in points of one frame per cell: pan_bench's
+// BM_MakePanViewIntoStrip (VGA frames on strips of 0.2° to 2°, Zen 4) measured the branch-free
+// form 25 % faster at 1 point per cell, 7 % at 6, level at 12-13 and 8-25 % slower at 25-100.
+constexpr std::size_t kBranchFreePointsPerCell = 12;
+
 void SplatBranchy(std::size_t n, const std::int32_t* __restrict cell, const double* __restrict key,
                   const std::uint64_t* __restrict da, ZCell* __restrict zb) {
   for (std::size_t i = 0; i < n; ++i) {
@@ -333,6 +612,28 @@ void Splat(std::size_t n, const std::int32_t* __restrict cell, const double* __r
     const D2 merged =
         std::bit_cast<D2>((std::bit_cast<L2>(next) & nearer) | (std::bit_cast<L2>(old) & ~nearer));
     std::memcpy(z, &merged, sizeof merged);
+  }
+}
+
+// Every cell empty: key +inf, distance and amplitude NaN. As 64-bit words, so that the loop is
+// a vector store of a constant (an assign of ZCell records compiles to two scalar stores each).
+TOFCAM_HOT_LOOP void ClearZBuffer(std::size_t n, ZCell* __restrict zb) {
+  const std::uint64_t key = std::bit_cast<std::uint64_t>(std::numeric_limits<double>::infinity());
+  const std::uint64_t da = PackDA(kNan, kNan);
+  auto* w = reinterpret_cast<std::uint64_t*>(zb);
+  for (std::size_t i = 0; i < n; ++i) {
+    w[2 * i] = key;
+    w[2 * i + 1] = da;
+  }
+}
+
+// The panorama's distance and amplitude from the cells' words.
+TOFCAM_HOT_LOOP void UnpackZBuffer(std::size_t n, const ZCell* __restrict zb,
+                                   float* __restrict distance, float* __restrict amplitude) {
+  for (std::size_t c = 0; c < n; ++c) {
+    const std::uint64_t da = zb[c].distance_amplitude;
+    distance[c] = std::bit_cast<float>(static_cast<std::uint32_t>(da));
+    amplitude[c] = std::bit_cast<float>(static_cast<std::uint32_t>(da >> 32));
   }
 }
 
@@ -438,7 +739,8 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
     if (!image->SameSize(cols, rows)) *image = Image<float>(cols, rows);
   }
   thread_local std::vector<ZCell> zbuffer;
-  zbuffer.assign(n_cells, ZCell{std::numeric_limits<double>::infinity(), PackDA(kNan, kNan)});
+  zbuffer.resize(n_cells);
+  ClearZBuffer(n_cells, zbuffer.data());
   view.frame_offsets.clear();
   view.camera_to_base.clear();
 
@@ -471,6 +773,13 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   out.flags.resize(capacity);
   std::size_t n_out = 0;
   thread_local Scratch sc;
+  // The AVX-512 form fuses BasePoints, PanCells' float loop and SplatInputs (BaseCellsAvx512).
+#if defined(TOFCAM_AVX512_FORMS)
+  const bool fused = internal::UseAvx512Forms();
+  const FloatStrip float_strip = ToFloatStrip(strip);
+#else
+  constexpr bool fused = false;
+#endif
   static_assert(sizeof(PixelFlags) == sizeof(std::uint16_t));
   for (std::size_t k = 0; k < frames.size(); ++k) {
     const MetricFrame& frame = frames[k];
@@ -498,21 +807,39 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
     }
     // Chunks of kChunk points through every pass, so that the scratch arrays stay in the core's
     // cache (at 1 MP a whole frame's would go through memory five times).
-    const bool coarse = n < n_cells;
+    const bool coarse = n < kBranchFreePointsPerCell * n_cells;
     const float* d = frame.radial_distance_m.data();
     for (std::size_t b = 0; b < n; b += kChunk) {
       const std::size_t m = std::min(kChunk, n - b);
-      BasePoints(m, d + b, flags + b, o.cloud.nan_mask, rays.x.data() + b, rays.y.data() + b,
-                 rays.z.data() + b, rot.data(), tr.data(), sc.bx.data(), sc.by.data(), sc.bz.data(),
-                 sc.valid.data(), sc.range2.data());
+      if (fused) {
+#if defined(TOFCAM_AVX512_FORMS)
+        // Base points, cells and the splat's inputs in one pass; the undecided cells after.
+        const std::uint32_t rechecks =
+            BaseCellsAvx512(m, d + b, flags + b, o.cloud.nan_mask, amplitude + b, rays.x.data() + b,
+                            rays.y.data() + b, rays.z.data() + b, rot.data(), tr.data(),
+                            float_strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
+                            sc.key.data(), sc.da.data(), sc.cell.data());
+        std::int32_t* cell = sc.cell.data();
+        double* key = sc.key.data();
+        RecheckCells(m, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), rechecks, cell,
+                     [cell, key](std::size_t i, std::int32_t c) {
+                       cell[i] = c >= 0 ? c : 0;
+                       if (c < 0) key[i] = std::numeric_limits<double>::infinity();
+                     });
+#endif
+      } else {
+        BasePoints(m, d + b, flags + b, o.cloud.nan_mask, rays.x.data() + b, rays.y.data() + b,
+                   rays.z.data() + b, rot.data(), tr.data(), sc.bx.data(), sc.by.data(),
+                   sc.bz.data(), sc.valid.data(), sc.range2.data());
+        internal::PanCells(m, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
+                           sc.cell.data());
+        SplatInputs(m, sc.cell.data(), sc.range2.data(), d + b, amplitude + b, sc.key.data(),
+                    sc.da.data());
+      }
       n_out =
           AppendPoints(m, !o.only_valid, sc.bx.data(), sc.by.data(), sc.bz.data(), amplitude + b,
                        intensity + b, delta_l + b, flags + b, sc.valid.data(), n_out, out);
-      // Panorama cells, then the z-buffered splat.
-      internal::PanCells(m, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
-                         sc.cell.data());
-      SplatInputs(m, sc.cell.data(), sc.range2.data(), d + b, amplitude + b, sc.key.data(),
-                  sc.da.data());
+      // The z-buffered splat.
       (coarse ? Splat : SplatBranchy)(m, sc.cell.data(), sc.key.data(), sc.da.data(),
                                       zbuffer.data());
     }
@@ -526,11 +853,7 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   if (view.cloud.width == 0) view.cloud.height = 0;
   float* pano_d = view.panorama_distance_m.data();
   float* pano_a = view.panorama_amplitude.data();
-  for (std::size_t c = 0; c < n_cells; ++c) {
-    const std::uint64_t da = zbuffer[c].distance_amplitude;
-    pano_d[c] = std::bit_cast<float>(static_cast<std::uint32_t>(da));
-    pano_a[c] = std::bit_cast<float>(static_cast<std::uint32_t>(da >> 32));
-  }
+  UnpackZBuffer(n_cells, zbuffer.data(), pano_d, pano_a);
 
   const double f_hz = frames[0].info.modulation_frequency_hz;
   const double far_default = (std::isfinite(f_hz) && f_hz > 0.0) ? UnambiguousRangeM(f_hz) : 0.0;
@@ -542,50 +865,19 @@ namespace internal {
 
 std::size_t PanCells(std::size_t n, const PanStrip& s, const float* x, const float* y,
                      const float* z, const std::uint8_t* valid, std::int32_t* cell) {
-  FloatStrip f{};
-  f.f0 = static_cast<float>(s.forward[0]);
-  f.f1 = static_cast<float>(s.forward[1]);
-  f.f2 = static_cast<float>(s.forward[2]);
-  f.l0 = static_cast<float>(s.left[0]);
-  f.l1 = static_cast<float>(s.left[1]);
-  f.l2 = static_cast<float>(s.left[2]);
-  f.u0 = static_cast<float>(s.up[0]);
-  f.u1 = static_cast<float>(s.up[1]);
-  f.u2 = static_cast<float>(s.up[2]);
-  f.max_az = static_cast<float>(s.max_azimuth_rad);
-  f.max_tan = static_cast<float>(s.max_tan_elevation);
-  f.inv_res = static_cast<float>(s.inv_resolution);
-  f.cols = static_cast<float>(s.cols);
-  f.rows = static_cast<float>(s.rows);
-  constexpr double kE = 0x1p-24;
-  const double inv_res = s.inv_resolution, max_tan = std::abs(s.max_tan_elevation);
-  const double q_max = 1.0 + max_tan + 1.0 / inv_res + 1e-3;
-  f.ec = static_cast<float>(
-      2.0 * (inv_res * (1e-6 + kE * (6.0 * q_max + 10.0)) + 3.0 * kE * (s.cols + 1.0)));
-  f.er = static_cast<float>(
-      2.0 * (inv_res * kE * (16.0 * q_max * q_max + 2.0 * max_tan) + 3.0 * kE * (s.rows + 1.0)));
-  f.cut = static_cast<float>(16.0 * kE * q_max);
-  FastCells(n, f, x, y, z, cell);
-  const std::size_t rechecks = MaskInvalid(n, valid, cell);
-  // A few per mille of the points (0.3 % at SR-2 on the default strip): skip blocks of
-  // 64 cells without one with vector compares (NextRecheckBlock).
-  std::size_t left = rechecks;
-  std::size_t i0 = 0;
-  while (left > 0) {
-    i0 = NextRecheckBlock(i0, n, cell);
-    if (i0 + 64 > n) break;
-    for (std::size_t i = i0; i < i0 + 64; ++i) {
-      if (cell[i] != kRecheckCell) continue;
-      cell[i] = ExactCell(s, x[i], y[i], z[i]);
-      --left;
-    }
-    i0 += 64;
+  const FloatStrip f = ToFloatStrip(s);
+  std::size_t rechecks = 0;
+#if defined(TOFCAM_AVX512_FORMS)
+  if (UseAvx512Forms()) {
+    rechecks = FastCellsAvx512(n, f, x, y, z, valid, cell);
+  } else
+#endif
+  {
+    FastCells(n, f, x, y, z, cell);
+    rechecks = MaskInvalid(n, valid, cell);
   }
-  for (std::size_t i = i0; left > 0 && i < n; ++i) {
-    if (cell[i] != kRecheckCell) continue;
-    cell[i] = ExactCell(s, x[i], y[i], z[i]);
-    --left;
-  }
+  RecheckCells(n, s, x, y, z, rechecks, cell,
+               [cell](std::size_t i, std::int32_t c) { cell[i] = c; });
   return rechecks;
 }
 

@@ -13,6 +13,7 @@
 #include <random>
 #include <vector>
 
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "tofcam/core/units.h"
 
 namespace tofcam::internal {
@@ -126,21 +127,32 @@ TEST(PanCellsTest, EveryPointGetsTheExactCell) {
                                     << ", " << c.max_az << "], elevation " << c.max_el);
     const Points p = TestPoints(s, seed++);
     const std::size_t n = p.x.size();
-    std::vector<std::int32_t> cell(n, 12345);
-    const std::size_t rechecks =
-        PanCells(n, s, p.x.data(), p.y.data(), p.z.data(), p.valid.data(), cell.data());
-    int mismatches = 0, in_strip = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::int32_t want = p.valid[i] ? ExactCell(s, p.x[i], p.y[i], p.z[i]) : kNoCell;
-      in_strip += want >= 0;
-      if (cell[i] != want && ++mismatches <= 5) {
-        ADD_FAILURE() << "point " << i << " (" << p.x[i] << ", " << p.y[i] << ", " << p.z[i]
-                      << "): cell " << cell[i] << ", exact " << want;
+    // Both forms of the float loop (the AVX-512 one, with fused multiply-adds, where the CPU
+    // has it; the portable one always), and counts that are not a multiple of 16 (a partial
+    // last block).
+    for (const bool portable : {false, true}) {
+      for (const std::size_t count : {n, n - 5}) {
+        SCOPED_TRACE(testing::Message() << (portable ? "portable" : "AVX-512 if available") << ", "
+                                        << count << " points");
+        const PortableFormsForTesting forms(portable);
+        std::vector<std::int32_t> cell(n, 12345);
+        const std::size_t rechecks =
+            PanCells(count, s, p.x.data(), p.y.data(), p.z.data(), p.valid.data(), cell.data());
+        int mismatches = 0, in_strip = 0;
+        for (std::size_t i = 0; i < count; ++i) {
+          const std::int32_t want = p.valid[i] ? ExactCell(s, p.x[i], p.y[i], p.z[i]) : kNoCell;
+          in_strip += want >= 0;
+          if (cell[i] != want && ++mismatches <= 5) {
+            ADD_FAILURE() << "point " << i << " (" << p.x[i] << ", " << p.y[i] << ", " << p.z[i]
+                          << "): cell " << cell[i] << ", exact " << want;
+          }
+        }
+        EXPECT_EQ(mismatches, 0);
+        for (std::size_t i = count; i < n; ++i) EXPECT_EQ(cell[i], 12345);  // nothing past n
+        EXPECT_GT(in_strip, 1000);  // the cases exercise cells, not only "outside"
+        EXPECT_GT(rechecks, 0u);    // and the double path
       }
     }
-    EXPECT_EQ(mismatches, 0);
-    EXPECT_GT(in_strip, 1000);  // the cases exercise cells, not only "outside"
-    EXPECT_GT(rechecks, 0u);    // and the double path
   }
 }
 

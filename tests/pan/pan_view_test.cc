@@ -6,8 +6,11 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <span>
 #include <vector>
 
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
+#include "pan/pan_cells.h"      // internal: the cell definition (src/pan)
 #include "tofcam/core/error.h"
 #include "tofcam/core/pixel_flags.h"
 #include "tofcam/core/units.h"
@@ -223,39 +226,106 @@ TEST(PanViewTest, SameViewAsTheStraightforwardAssembly) {
   }
   // The last frame without flags (all its points count; missing channels become NaN / clear).
   frames.back().flags = Image<PixelFlags>();
-  // The default 0.5° strip has more cells than a frame has points (the branch-free splat); the
-  // 2° strip fewer (several points per cell: the splat with a branch). All points kept, too.
-  for (const double resolution_deg : {0.5, 2.0}) {
-    for (const bool only_valid : {true, false}) {
-      SCOPED_TRACE(testing::Message() << resolution_deg << " deg, only_valid " << only_valid);
-      PanViewOptions o;
-      o.resolution_deg = resolution_deg;
-      o.only_valid = only_valid;
-      const PanView view = MakePanView(frames, rays, o);
-      const Reference ref = ReferenceView(frames, rays, o, view.panorama_distance_m.width(),
-                                          view.panorama_distance_m.height());
-      ASSERT_EQ(view.cloud.size(), ref.cloud.x.size());
-      EXPECT_TRUE(SameBits(view.cloud.x, ref.cloud.x));
-      EXPECT_TRUE(SameBits(view.cloud.y, ref.cloud.y));
-      EXPECT_TRUE(SameBits(view.cloud.z, ref.cloud.z));
-      EXPECT_TRUE(SameBits(view.cloud.amplitude, ref.cloud.amplitude));
-      EXPECT_TRUE(SameBits(view.cloud.intensity, ref.cloud.intensity));
-      EXPECT_TRUE(SameBits(view.cloud.delta_l_m, ref.cloud.delta_l_m));
-      EXPECT_EQ(view.cloud.flags, ref.cloud.flags);
-      int filled = 0;
-      for (std::size_t i = 0; i < ref.distance.size(); ++i) {
-        const float a = view.panorama_distance_m.data()[i], b = ref.distance.data()[i];
-        if (std::isnan(b)) {
-          EXPECT_TRUE(std::isnan(a)) << i;
-          continue;
+  // The default 0.5° strip has more cells than a frame has points, the 2° strip 6.5 points of a
+  // frame per cell (both the branch-free splat), the 5° strip 39 (the splat with a branch: more
+  // than 12). All points kept, too.
+  // Both forms: the fused AVX-512 pass where the CPU has it, and the portable loops.
+  for (const bool portable : {false, true}) {
+    for (const double resolution_deg : {0.5, 2.0, 5.0}) {
+      for (const bool only_valid : {true, false}) {
+        SCOPED_TRACE(testing::Message() << resolution_deg << " deg, only_valid " << only_valid
+                                        << (portable ? ", portable" : ", AVX-512 if available"));
+        const internal::PortableFormsForTesting forms(portable);
+        PanViewOptions o;
+        o.resolution_deg = resolution_deg;
+        o.only_valid = only_valid;
+        const PanView view = MakePanView(frames, rays, o);
+        const Reference ref = ReferenceView(frames, rays, o, view.panorama_distance_m.width(),
+                                            view.panorama_distance_m.height());
+        ASSERT_EQ(view.cloud.size(), ref.cloud.x.size());
+        EXPECT_TRUE(SameBits(view.cloud.x, ref.cloud.x));
+        EXPECT_TRUE(SameBits(view.cloud.y, ref.cloud.y));
+        EXPECT_TRUE(SameBits(view.cloud.z, ref.cloud.z));
+        EXPECT_TRUE(SameBits(view.cloud.amplitude, ref.cloud.amplitude));
+        EXPECT_TRUE(SameBits(view.cloud.intensity, ref.cloud.intensity));
+        EXPECT_TRUE(SameBits(view.cloud.delta_l_m, ref.cloud.delta_l_m));
+        EXPECT_EQ(view.cloud.flags, ref.cloud.flags);
+        int filled = 0;
+        for (std::size_t i = 0; i < ref.distance.size(); ++i) {
+          const float a = view.panorama_distance_m.data()[i], b = ref.distance.data()[i];
+          if (std::isnan(b)) {
+            EXPECT_TRUE(std::isnan(a)) << i;
+            continue;
+          }
+          ++filled;
+          EXPECT_EQ(a, b) << i;
+          EXPECT_EQ(view.panorama_amplitude.data()[i], ref.amplitude.data()[i]) << i;
         }
-        ++filled;
-        EXPECT_EQ(a, b) << i;
-        EXPECT_EQ(view.panorama_amplitude.data()[i], ref.amplitude.data()[i]) << i;
+        // Most of the strip the five frames cover is filled.
+        EXPECT_GT(filled, static_cast<int>(view.panorama_distance_m.size() / 3));
       }
-      // Most of the strip the five frames cover is filled.
-      EXPECT_GT(filled, static_cast<int>(view.panorama_distance_m.size() / 3));
     }
+  }
+}
+
+TEST(PanViewTest, PointJustOutsideTheStripTakesNoCell) {
+  // A point a hair (5e-7 rad) beyond the strip's left edge, in its top row: the float cell loop
+  // cannot tell which side it is on and leaves it to the double definition, which puts it
+  // outside. It must land in no cell; in particular not in cell 0 (the top-left one), where the
+  // splat parks points without a cell under a key that never wins.
+  const PanViewOptions o;  // 0.5°, azimuth ±90°, elevation ±30°
+  const Eigen::Vector3d up = o.pan_unit.axis.normalized(), z(0.0, 0.0, 1.0);
+  const Eigen::Vector3d forward = (z - z.dot(up) * up).normalized(), left = up.cross(forward);
+  internal::PanStrip strip{};
+  for (int i = 0; i < 3; ++i) {
+    strip.forward[i] = forward[i];
+    strip.left[i] = left[i];
+    strip.up[i] = up[i];
+  }
+  strip.max_azimuth_rad = o.max_azimuth_deg * kDeg;
+  strip.max_tan_elevation = std::tan(o.max_elevation_deg * kDeg);
+  strip.inv_resolution = 1.0 / (o.resolution_deg * kDeg);
+  strip.cols = 360;
+  strip.rows = 133;
+  const double az = strip.max_azimuth_rad + 5e-7;
+  const double t = strip.max_tan_elevation - 0.5 * o.resolution_deg * kDeg;
+  const Eigen::Vector3d edge = 0.8 * (std::cos(az) * forward + std::sin(az) * left + t * up);
+  const Eigen::Vector3d middle = 2.0 * forward + 0.3 * left;  // an ordinary point
+  const Eigen::Isometry3d pose = o.pan_unit.CameraToBase(0.0);
+  RayTable rays{Image<float>(2, 1), Image<float>(2, 1), Image<float>(2, 1)};
+  MetricFrame f;
+  f.radial_distance_m = Image<float>(2, 1);
+  f.amplitude = Image<float>(2, 1, 500.0f);
+  f.flags = Image<PixelFlags>(2, 1);
+  f.info.pan_angle_rad = 0.0;
+  for (int k = 0; k < 2; ++k) {
+    const Eigen::Vector3d in_cam = pose.inverse() * (k == 0 ? edge : middle);
+    const Eigen::Vector3d ray = in_cam.normalized();
+    rays.x[k] = static_cast<float>(ray.x());
+    rays.y[k] = static_cast<float>(ray.y());
+    rays.z[k] = static_cast<float>(ray.z());
+    f.radial_distance_m[k] = static_cast<float>(in_cam.norm());
+  }
+  for (const bool portable : {false, true}) {
+    SCOPED_TRACE(portable ? "portable" : "AVX-512 if available");
+    const internal::PortableFormsForTesting forms(portable);
+    const PanView view = MakePanView(std::span<const MetricFrame>(&f, 1), rays, o);
+    ASSERT_EQ(view.cloud.size(), 2u);
+    ASSERT_EQ(view.panorama_distance_m.width(), strip.cols);
+    ASSERT_EQ(view.panorama_distance_m.height(), strip.rows);
+    // Premise: the float loop leaves the edge point undecided, and it is outside the strip.
+    std::int32_t cell = 0;
+    const std::uint8_t valid = 1;
+    EXPECT_EQ(internal::PanCells(1, strip, &view.cloud.x[0], &view.cloud.y[0], &view.cloud.z[0],
+                                 &valid, &cell),
+              1u);
+    EXPECT_EQ(cell, internal::kNoCell);
+    EXPECT_TRUE(std::isnan(view.panorama_distance_m(0, 0)));
+    int filled = 0;
+    for (std::size_t i = 0; i < view.panorama_distance_m.size(); ++i) {
+      filled += std::isfinite(view.panorama_distance_m.data()[i]) ? 1 : 0;
+    }
+    EXPECT_EQ(filled, 1);  // the middle point only
   }
 }
 
