@@ -2,48 +2,178 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
+#include <vector>
 
+#include "../core/avx512_forms.h"
 #include "hot_loop.h"
 #include "simd.h"
 #include "tofcam/core/error.h"
+
+#if defined(TOFCAM_AVX512_FORMS)
+#include <immintrin.h>
+#endif
 
 namespace tofcam {
 namespace {
 
 [[noreturn]] void Bad(const std::string& what) { throw Error(ErrorCode::kInvalidArgument, what); }
 
+// Relative half-width of the band around step = min_jump_sigma x sqrt(s² + s_n²) where the
+// squared test below cannot tell the two sides apart and the exact test decides. Each side of
+// the squared test is within a few units in the last place (1e-15) of its exact value, as is
+// each side of the exact test, so outside this band both tests agree; inside it lie ties in
+// practice (float inputs are 1e-7 apart).
+constexpr double kBand = 1e-12;
+
+// The edge test of one neighbour as the definition states it: step > min_jump_sigma x
+// sqrt(s² + s_n²) (false for a NaN step).
+inline bool ExactEdgeStep(double step, double min_jump_sigma, double sc, double sn) {
+  return step > min_jump_sigma * std::sqrt(sc * sc + sn * sn);
+}
+
 // One row of the default uncertainty (no extrapolated edges) from padded rows (index -1 and w
 // exist): `d` the usable distances (NaN where not usable or outside the image), `s` ΔL, `unknown`
 // 1 where the pixel carries one of the unknown-neighbour flags; `du`, `dd` (`su`, `sd`, `ku`,
-// `kd`) the rows above and below. The same double operations in the same order as the per-pixel
-// form in ComputeUncertainty, four pixels per step (max of non-negative finite values is exact
-// in any order): u = sqrt(s² + edge²), +inf for an unusable centre or an unknown neighbour.
-TOFCAM_HOT_LOOP void UncertaintyRow(int w, double min_jump_sigma, double edge_fraction,
-                                    const float* __restrict d, const float* __restrict s,
-                                    const std::uint8_t* __restrict unknown,
-                                    const float* __restrict du, const float* __restrict su,
-                                    const std::uint8_t* __restrict ku, const float* __restrict dd,
-                                    const float* __restrict sd, const std::uint8_t* __restrict kd,
-                                    float* __restrict out) {
+// `kd`) the rows above and below. u = sqrt(s² + edge²) in double as the per-pixel form in
+// ComputeUncertainty (max of non-negative finite values is exact in any order), +inf for an
+// unusable centre or an unknown neighbour. The four edge tests compare squares (step² against
+// min_jump_sigma² (s² + s_n²), no square root; four of the five square roots were the row's
+// cost); a test within kBand of a tie sets `tie[c]` and the caller redoes that pixel with the
+// exact tests (RedoPixel). Returns how many pixels it marked.
+TOFCAM_HOT_LOOP std::uint32_t UncertaintyRow(int w, double min_jump_sigma, double edge_fraction,
+                                             const float* __restrict d, const float* __restrict s,
+                                             const std::uint8_t* __restrict unknown,
+                                             const float* __restrict du, const float* __restrict su,
+                                             const std::uint8_t* __restrict ku,
+                                             const float* __restrict dd, const float* __restrict sd,
+                                             const std::uint8_t* __restrict kd,
+                                             float* __restrict out, std::uint8_t* __restrict tie) {
   constexpr float kInf = std::numeric_limits<float>::infinity();
+  const double m2 = min_jump_sigma * min_jump_sigma;
+  std::uint32_t ties = 0;  // 32 bits: GCC vectorises the count
   for (int c = 0; c < w; ++c) {
     const double dc = d[c], sc = s[c];
     double edge = 0.0;
+    unsigned near = 0;
     // Neighbours up, down, left, right.
     const double dn[4] = {du[c], dd[c], d[c - 1], d[c + 1]};
     const double sn[4] = {su[c], sd[c], s[c - 1], s[c + 1]};
     for (int k = 0; k < 4; ++k) {
       const double step = std::abs(dn[k] - dc);
+      const double s2 = step * step, r2 = m2 * (sc * sc + sn[k] * sn[k]);
       // False for a NaN (unusable) neighbour.
-      const bool edge_step = step > min_jump_sigma * std::sqrt(sc * sc + sn[k] * sn[k]);
+      const bool edge_step = s2 > r2 * (1.0 + kBand);
+      near |= static_cast<unsigned>(!edge_step & !(s2 < r2 * (1.0 - kBand)) & (step == step));
       edge = std::max(edge, edge_step ? edge_fraction * step : 0.0);
     }
     const bool unbounded = (ku[c] | kd[c] | unknown[c - 1] | unknown[c + 1]) != 0;
     const float u = static_cast<float>(std::sqrt(sc * sc + edge * edge));
     out[c] = (dc == dc) && !unbounded ? u : kInf;
+    tie[c] = static_cast<std::uint8_t>(near);
+    ties += near;
   }
+  return ties;
+}
+
+#if defined(TOFCAM_AVX512_FORMS)
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
+// Eight floats of a padded row (lanes beyond `lanes` 0) as doubles.
+TOFCAM_AVX512_INLINE __m512d Load8(__mmask8 lanes, const float* p) {
+  return _mm512_cvtps_pd(_mm256_maskz_loadu_ps(lanes, p));
+}
+
+// Lanes of eight unknown-neighbour bytes that are set.
+TOFCAM_AVX512_INLINE __mmask8 Bytes8(__mmask8 lanes, const std::uint8_t* p) {
+  const __m128i v = _mm_maskz_loadu_epi8(lanes, p);
+  return static_cast<__mmask8>(_mm_test_epi8_mask(v, v));
+}
+
+// UncertaintyRow for AVX-512 CPUs, eight pixels (doubles) at a time, written with intrinsics:
+// GCC's AVX2 clone of the row spills (four neighbours of four lanes each). The same double
+// operations in the same order (separate multiplies and adds: the file is built without
+// contraction), the same band and ties.
+TOFCAM_AVX512_TARGET std::uint32_t UncertaintyRow8(
+    int w, double min_jump_sigma, double edge_fraction, const float* __restrict d,
+    const float* __restrict s, const std::uint8_t* __restrict unknown, const float* __restrict du,
+    const float* __restrict su, const std::uint8_t* __restrict ku, const float* __restrict dd,
+    const float* __restrict sd, const std::uint8_t* __restrict kd, float* __restrict out,
+    std::uint8_t* __restrict tie) {
+  const __m512d m2 = _mm512_set1_pd(min_jump_sigma * min_jump_sigma);
+  const __m512d fraction = _mm512_set1_pd(edge_fraction);
+  const __m512d above = _mm512_set1_pd(1.0 + kBand), below = _mm512_set1_pd(1.0 - kBand);
+  const __m256 inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
+  std::uint32_t ties = 0;
+  for (int c = 0; c < w; c += 8) {
+    const __mmask8 lanes =
+        w - c >= 8 ? __mmask8{0xff} : static_cast<__mmask8>((1u << (w - c)) - 1u);
+    const __m512d dc = Load8(lanes, d + c), sc = Load8(lanes, s + c);
+    const __m512d sc2 = _mm512_mul_pd(sc, sc);
+    __m512d edge = _mm512_setzero_pd();
+    __mmask8 near = 0;
+    const float* dn[4] = {du + c, dd + c, d + c - 1, d + c + 1};
+    const float* sn[4] = {su + c, sd + c, s + c - 1, s + c + 1};
+    for (int k = 0; k < 4; ++k) {
+      const __m512d step = _mm512_abs_pd(_mm512_sub_pd(Load8(lanes, dn[k]), dc));
+      const __m512d snk = Load8(lanes, sn[k]);
+      const __m512d s2 = _mm512_mul_pd(step, step);
+      const __m512d r2 = _mm512_mul_pd(m2, _mm512_add_pd(sc2, _mm512_mul_pd(snk, snk)));
+      const __mmask8 yes = _mm512_cmp_pd_mask(s2, _mm512_mul_pd(r2, above), _CMP_GT_OQ);
+      const __mmask8 no = _mm512_cmp_pd_mask(s2, _mm512_mul_pd(r2, below), _CMP_LT_OQ);
+      near |= static_cast<__mmask8>(~(yes | no) & _mm512_cmp_pd_mask(step, step, _CMP_ORD_Q));
+      edge = _mm512_max_pd(_mm512_maskz_mul_pd(yes, fraction, step), edge);
+    }
+    const __mmask8 unbounded = Bytes8(lanes, ku + c) | Bytes8(lanes, kd + c) |
+                               Bytes8(lanes, unknown + c - 1) | Bytes8(lanes, unknown + c + 1);
+    const __m256 u = _mm512_cvtpd_ps(_mm512_sqrt_pd(_mm512_add_pd(sc2, _mm512_mul_pd(edge, edge))));
+    const __mmask8 finite =
+        static_cast<__mmask8>(_mm512_cmp_pd_mask(dc, dc, _CMP_ORD_Q) & ~unbounded);
+    _mm256_mask_storeu_ps(out + c, lanes, _mm256_mask_mov_ps(inf, finite, u));
+    near &= lanes;
+    _mm_mask_storeu_epi8(tie + c, lanes, _mm_maskz_set1_epi8(near, 1));
+    ties += static_cast<std::uint32_t>(__builtin_popcount(near));
+  }
+  return ties;
+}
+TOFCAM_AVX512_DIAGNOSTICS_END
+#endif
+
+// UncertaintyRow8 where the CPU has AVX-512 (unless a test asked for the portable form), else
+// UncertaintyRow.
+std::uint32_t UncertaintyRowAnyCpu(int w, double min_jump_sigma, double edge_fraction,
+                                   const float* d, const float* s, const std::uint8_t* unknown,
+                                   const float* du, const float* su, const std::uint8_t* ku,
+                                   const float* dd, const float* sd, const std::uint8_t* kd,
+                                   float* out, std::uint8_t* tie) {
+#if defined(TOFCAM_AVX512_FORMS)
+  if (internal::UseAvx512Forms()) {
+    return UncertaintyRow8(w, min_jump_sigma, edge_fraction, d, s, unknown, du, su, ku, dd, sd, kd,
+                           out, tie);
+  }
+#endif
+  return UncertaintyRow(w, min_jump_sigma, edge_fraction, d, s, unknown, du, su, ku, dd, sd, kd,
+                        out, tie);
+}
+
+// UncertaintyRow's pixel c with the exact edge tests.
+void RedoPixel(int c, double min_jump_sigma, double edge_fraction, const float* d, const float* s,
+               const std::uint8_t* unknown, const float* du, const float* su,
+               const std::uint8_t* ku, const float* dd, const float* sd, const std::uint8_t* kd,
+               float* out) {
+  const double dc = d[c], sc = s[c];
+  double edge = 0.0;
+  const double dn[4] = {du[c], dd[c], d[c - 1], d[c + 1]};
+  const double sn[4] = {su[c], sd[c], s[c - 1], s[c + 1]};
+  for (int k = 0; k < 4; ++k) {
+    const double step = std::abs(dn[k] - dc);
+    const bool edge_step = ExactEdgeStep(step, min_jump_sigma, sc, sn[k]);
+    edge = std::max(edge, edge_step ? edge_fraction * step : 0.0);
+  }
+  const bool unbounded = (ku[c] | kd[c] | unknown[c - 1] | unknown[c + 1]) != 0;
+  const float u = static_cast<float>(std::sqrt(sc * sc + edge * edge));
+  out[c] = (dc == dc) && !unbounded ? u : std::numeric_limits<float>::infinity();
 }
 
 // One row of the padded inputs of UncertaintyRow: the distance where the pixel is usable (no
@@ -130,10 +260,19 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
       PadRow(w, frame.radial_distance_m.Row(r).data(), frame.delta_l_m.Row(r).data(),
              frame.flags.Row(r).data(), options.unknown_neighbour_flags, &pd[o], &ps[o], &pk[o]);
     }
+    thread_local std::vector<std::uint8_t> tie;
+    tie.resize(static_cast<std::size_t>(w));
     for (int r = 0; r < h; ++r) {
       const std::size_t up = static_cast<std::size_t>(r) * pw + 1, mid = up + pw, down = mid + pw;
-      UncertaintyRow(w, options.min_jump_sigma, options.edge_fraction, &pd[mid], &ps[mid], &pk[mid],
-                     &pd[up], &ps[up], &pk[up], &pd[down], &ps[down], &pk[down], out.Row(r).data());
+      float* row = out.Row(r).data();
+      const std::uint32_t ties = UncertaintyRowAnyCpu(
+          w, options.min_jump_sigma, options.edge_fraction, &pd[mid], &ps[mid], &pk[mid], &pd[up],
+          &ps[up], &pk[up], &pd[down], &ps[down], &pk[down], row, tie.data());
+      for (int c = 0; ties > 0 && c < w; ++c) {
+        if (tie[static_cast<std::size_t>(c)] == 0) continue;
+        RedoPixel(c, options.min_jump_sigma, options.edge_fraction, &pd[mid], &ps[mid], &pk[mid],
+                  &pd[up], &ps[up], &pk[up], &pd[down], &ps[down], &pk[down], row);
+      }
     }
     return out;
   }

@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -158,47 +159,82 @@ TEST(Uncertainty, RowsEqualTheDefinitionForEverySizeAndPattern) {
     }
     UncertaintyOptions o;
     o.unknown_neighbour_flags = static_cast<std::uint16_t>(Flag::kSaturated);
-    const Image<float> got = ComputeUncertainty(m, o);
-    auto usable = [&](int r, int c) {
-      return !m.flags(r, c).Any(kRejectMask) && std::isfinite(m.radial_distance_m(r, c)) &&
-             std::isfinite(m.delta_l_m(r, c));
-    };
-    for (int r = 0; r < h; ++r) {
-      for (int c = 0; c < w; ++c) {
-        float expected = kInf;
-        if (usable(r, c)) {
-          const double d = m.radial_distance_m(r, c), s = m.delta_l_m(r, c);
-          double jump = 0.0;
-          bool unknown = false;
-          for (const auto& [dr, dc] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
-            const int rr = r + dr, cc = c + dc;
-            if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
-            unknown |= m.flags(rr, cc).Any(o.unknown_neighbour_flags);
-            if (!usable(rr, cc)) continue;
-            const double step = std::abs(static_cast<double>(m.radial_distance_m(rr, cc)) - d);
-            const double sj = m.delta_l_m(rr, cc);
-            if (step > o.min_jump_sigma * std::sqrt(s * s + sj * sj)) jump = std::max(jump, step);
+    // Both forms: the AVX-512 row where the CPU has it, and the portable one.
+    for (const bool portable : {false, true}) {
+      SCOPED_TRACE(portable ? "portable" : "AVX-512 if available");
+      const internal::PortableFormsForTesting forms(portable);
+      const Image<float> got = ComputeUncertainty(m, o);
+      auto usable = [&](int r, int c) {
+        return !m.flags(r, c).Any(kRejectMask) && std::isfinite(m.radial_distance_m(r, c)) &&
+               std::isfinite(m.delta_l_m(r, c));
+      };
+      for (int r = 0; r < h; ++r) {
+        for (int c = 0; c < w; ++c) {
+          float expected = kInf;
+          if (usable(r, c)) {
+            const double d = m.radial_distance_m(r, c), s = m.delta_l_m(r, c);
+            double jump = 0.0;
+            bool unknown = false;
+            for (const auto& [dr, dc] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
+              const int rr = r + dr, cc = c + dc;
+              if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
+              unknown |= m.flags(rr, cc).Any(o.unknown_neighbour_flags);
+              if (!usable(rr, cc)) continue;
+              const double step = std::abs(static_cast<double>(m.radial_distance_m(rr, cc)) - d);
+              const double sj = m.delta_l_m(rr, cc);
+              if (step > o.min_jump_sigma * std::sqrt(s * s + sj * sj)) jump = std::max(jump, step);
+            }
+            const double edge = o.edge_fraction * jump;
+            if (!unknown) expected = static_cast<float>(std::sqrt(s * s + edge * edge));
+            finite += !portable && !unknown;
+            edges += !portable && !unknown && jump > 0.0;
           }
-          const double edge = o.edge_fraction * jump;
-          if (!unknown) expected = static_cast<float>(std::sqrt(s * s + edge * edge));
-          finite += !unknown;
-          edges += !unknown && jump > 0.0;
+          ASSERT_EQ(std::memcmp(&got(r, c), &expected, sizeof expected), 0)
+              << w << "x" << h << " at (" << r << ", " << c << "): " << got(r, c) << " vs "
+              << expected;
         }
-        ASSERT_EQ(std::memcmp(&got(r, c), &expected, sizeof expected), 0)
-            << w << "x" << h << " at (" << r << ", " << c << "): " << got(r, c) << " vs "
-            << expected;
       }
-    }
-    // The filter flags exactly the usable pixels above the threshold (and those next to a
-    // clipped one).
-    const Image<PixelFlags> flags = UncertaintyFilter(m, o);
-    for (std::size_t i = 0; i < flags.size(); ++i) {
-      const bool low = !m.flags[i].Any(kRejectMask) && !(got[i] <= o.max_uncertainty_m);
-      EXPECT_EQ(flags[i].Has(Flag::kLowConfidence), low) << i;
+      // The filter flags exactly the usable pixels above the threshold (and those next to a
+      // clipped one).
+      const Image<PixelFlags> flags = UncertaintyFilter(m, o);
+      for (std::size_t i = 0; i < flags.size(); ++i) {
+        const bool low = !m.flags[i].Any(kRejectMask) && !(got[i] <= o.max_uncertainty_m);
+        EXPECT_EQ(flags[i].Has(Flag::kLowConfidence), low) << i;
+      }
     }
   }
   EXPECT_GT(finite, 100);
   EXPECT_GT(edges, 30);
+}
+
+TEST(Uncertainty, AStepThatTiesTheThresholdIsNoEdge) {
+  // The edge test is step > min_jump_sigma x sqrt(s² + s_n²). With s = 0.375, s_n = 0.5 the
+  // square root is 0.625 exactly, so a step of 3 x 0.625 = 1.875 ties the threshold (no edge:
+  // u = s) and the next float above it is an edge (u = sqrt(s² + (step / 2)²)). The rows test
+  // squares (step² against 9 x 0.390625), where a tie sits in the band left to the exact test.
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(3, 1);
+  m.delta_l_m = Image<float>(3, 1);
+  m.flags = Image<PixelFlags>(3, 1);
+  m.amplitude = Image<float>(3, 1, 1000.0f);
+  m.radial_distance_m[0] = 1.0f;
+  m.radial_distance_m[1] = 2.875f;  // 1.875 from pixel 0
+  m.radial_distance_m[2] = 2.875f;
+  m.delta_l_m[0] = 0.375f;
+  m.delta_l_m[1] = 0.5f;
+  m.delta_l_m[2] = 0.5f;
+  const float above = std::nextafter(2.875f, 4.0f);
+  const double half_step = 0.5 * (static_cast<double>(above) - 1.0);
+  for (const bool portable : {false, true}) {
+    SCOPED_TRACE(portable ? "portable" : "AVX-512 if available");
+    const internal::PortableFormsForTesting forms(portable);
+    m.radial_distance_m[1] = 2.875f;
+    EXPECT_EQ(ComputeUncertainty(m, {})[0], 0.375f);
+    m.radial_distance_m[1] = above;
+    const float edge = ComputeUncertainty(m, {})[0];
+    EXPECT_EQ(edge, static_cast<float>(std::sqrt(0.140625 + half_step * half_step)));
+    EXPECT_GT(edge, 0.9f);
+  }
 }
 
 TEST(Uncertainty, BadInputIsAClearError) {
