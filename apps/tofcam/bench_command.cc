@@ -244,14 +244,15 @@ void Sink(Workspace& ws, const void* p) { ws.sink += reinterpret_cast<std::uintp
 constexpr std::string_view kPanStage = "pan assembly (5 frames)";
 
 // The pan assembly's traffic per input pixel: each input pixel's distance, amplitude, intensity,
-// ΔL (4 bytes each), flags (2) and ray (12) in; the merged cloud's kept points (x, y, z,
-// amplitude, intensity, ΔL: 24 bytes, and 2 of flags) and the panorama's cells (distance 4,
-// amplitude 4, colour 3) out, per input frame.
+// ΔL (4 bytes each) and flags (2) in, and the ray table (12 bytes a pixel) once per call (the
+// frames share it); the merged cloud's kept points (x, y, z, amplitude, intensity, ΔL: 24 bytes,
+// and 2 of flags) and the panorama's cells (distance 4, amplitude 4, colour 3) out; over the
+// call's input frames.
 double PanTraffic(const Workspace& ws) {
   const PanView& v = ws.pan_view;
-  double in = 0.0;
+  double in = 12.0 * static_cast<double>(ws.pan_frames.front().radial_distance_m.size());
   for (const MetricFrame& f : ws.pan_frames) {
-    in += 30.0 * static_cast<double>(f.radial_distance_m.size());
+    in += 18.0 * static_cast<double>(f.radial_distance_m.size());
   }
   const double out =
       26.0 * static_cast<double>(v.cloud.size()) + 11.0 * static_cast<double>(v.panorama.size());

@@ -161,30 +161,13 @@ TOFCAM_AVX512_INLINE CellConsts BroadcastStrip(const FloatStrip& k) {
 TOFCAM_AVX512_INLINE __m512i Cells16(const CellConsts& k, __m512 px, __m512 py, __m512 pz,
                                      __mmask16 ok, __mmask16& undecided) {
   const __m512 zero = _mm512_setzero_ps();
-  constexpr float kPiF = static_cast<float>(kPi);
   const __m512 pf = _mm512_fmadd_ps(pz, k.f2, _mm512_fmadd_ps(py, k.f1, _mm512_mul_ps(px, k.f0)));
   const __m512 pl = _mm512_fmadd_ps(pz, k.l2, _mm512_fmadd_ps(py, k.l1, _mm512_mul_ps(px, k.l0)));
   const __m512 pu = _mm512_fmadd_ps(pz, k.u2, _mm512_fmadd_ps(py, k.u1, _mm512_mul_ps(px, k.u0)));
   const __m512 rho = _mm512_sqrt_ps(_mm512_fmadd_ps(pf, pf, _mm512_mul_ps(pl, pl)));
   const __m512 tan_el = _mm512_div_ps(pu, _mm512_max_ps(rho, _mm512_set1_ps(1e-6f)));
-  // FastAtan2F(pl, pf).
-  const __m512 ax = _mm512_abs_ps(pf), ay = _mm512_abs_ps(pl);
-  const __m512 hi = _mm512_max_ps(ax, ay), lo = _mm512_min_ps(ax, ay);
-  const __mmask16 reduce = _mm512_cmp_ps_mask(
-      lo, _mm512_mul_ps(_mm512_set1_ps(0.41421356237309504880f), hi), _CMP_GT_OQ);
-  const __m512 num = _mm512_mask_sub_ps(lo, reduce, lo, hi);
-  const __m512 den = _mm512_max_ps(_mm512_mask_add_ps(hi, reduce, lo, hi), _mm512_set1_ps(1e-30f));
-  const __m512 u = _mm512_div_ps(num, den);
-  const __m512 uu = _mm512_mul_ps(u, u);
-  __m512 poly = _mm512_set1_ps(-1.0f / 15);
-  for (const float c : {1.0f / 13, -1.0f / 11, 1.0f / 9, -1.0f / 7, 1.0f / 5, -1.0f / 3, 1.0f}) {
-    poly = _mm512_fmadd_ps(poly, uu, _mm512_set1_ps(c));
-  }
-  __m512 a = _mm512_fmadd_ps(u, poly, _mm512_maskz_mov_ps(reduce, _mm512_set1_ps(kPiF / 4)));
-  a = _mm512_mask_sub_ps(a, _mm512_cmp_ps_mask(ay, ax, _CMP_GT_OQ), _mm512_set1_ps(kPiF / 2), a);
-  a = _mm512_mask_sub_ps(a, _mm512_cmp_ps_mask(pf, zero, _CMP_LT_OQ), _mm512_set1_ps(kPiF), a);
-  a = _mm512_mask_xor_ps(a, _mm512_cmp_ps_mask(pl, zero, _CMP_LT_OQ), a,
-                         _mm512_castsi512_ps(_mm512_set1_epi32(INT32_MIN)));
+  const __m512 a = internal::FastAtan2F16(pl, pf);
+  const __m512 ay = _mm512_abs_ps(pl);
   // The cell interval and its tests, as FastCells.
   const __m512 col = _mm512_mul_ps(_mm512_sub_ps(k.max_az, a), k.inv_res);
   const __m512 row = _mm512_mul_ps(_mm512_sub_ps(k.max_tan, tan_el), k.inv_res);
@@ -252,19 +235,32 @@ TOFCAM_AVX512_INLINE __m512 RotateAxis(__m512 ra, __m512 rb, __m512 rc, __m512 t
                        tr);
 }
 
-// BasePoints, FastCells, MaskInvalid and SplatInputs in one pass for one chunk: the base points
-// (the same operations as BasePoints, in its order: the file is built without contraction, and
-// these are separate multiplies and adds), their validity, and for the splat each point's key
-// (its range2 where it has or may have a cell, +inf where it certainly has none), distance and
-// amplitude word, and cell (0 where none; kRecheckCell where ExactCell must decide). Returns how
-// many points are left to recheck.
+// Where BaseCellsAvx512 appends a chunk's points to the merged cloud: x, y, z, amplitude,
+// intensity, ΔL and flags at their next free element (room for 16 past the last point), and
+// whether every point is kept or only the valid ones.
+struct AppendAt {
+  float* channel[6];
+  std::uint16_t* flags;
+  bool keep_all;
+};
+
+// BasePoints, FastCells, MaskInvalid, SplatInputs and AppendPoints in one pass for one chunk:
+// the base points (the same operations as BasePoints, in its order: the file is built without
+// contraction, and these are separate multiplies and adds), their validity, for the splat each
+// point's key (its range2 where it has or may have a cell, +inf where it certainly has none),
+// distance and amplitude word, and cell (0 where none; kRecheckCell where ExactCell must
+// decide), and the kept points appended to the cloud (compressed in a register, then a
+// whole-vector store; the compress-to-memory form is microcoded and slow on Zen 4), so the
+// cloud's stores overlap the arithmetic. Returns how many points are left to recheck; `kept`
+// receives how many were appended.
 TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
     std::size_t n, const float* __restrict d, const std::uint16_t* __restrict flags,
-    std::uint16_t nan_mask, const float* __restrict a, const float* __restrict rx,
-    const float* __restrict ry, const float* __restrict rz, const float* __restrict r,
-    const float* __restrict t, const FloatStrip& strip, float* __restrict bx, float* __restrict by,
-    float* __restrict bz, std::uint8_t* __restrict valid, double* __restrict key,
-    std::uint64_t* __restrict da, std::int32_t* __restrict cell) {
+    std::uint16_t nan_mask, const float* __restrict a, const float* __restrict in,
+    const float* __restrict dl, const float* __restrict rx, const float* __restrict ry,
+    const float* __restrict rz, const float* __restrict r, const float* __restrict t,
+    const FloatStrip& strip, float* __restrict bx, float* __restrict by, float* __restrict bz,
+    double* __restrict key, std::uint64_t* __restrict da, std::int32_t* __restrict cell,
+    const AppendAt& out, std::size_t& kept) {
   const CellConsts k = BroadcastStrip(strip);
   __m512 rot[9];
   for (int j = 0; j < 9; ++j) rot[j] = _mm512_set1_ps(r[j]);
@@ -279,6 +275,7 @@ TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
   const __m512i interleave_hi =
       _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
   std::uint32_t rechecks = 0;
+  kept = 0;
   for (std::size_t i = 0; i < n; i += 16) {
     const __mmask16 lanes = Lanes(n, i);
     const __m512 di = _mm512_maskz_loadu_ps(lanes, d + i);
@@ -300,7 +297,18 @@ TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
     ok = _mm512_mask_cmp_ps_mask(ok, _mm512_abs_ps(py), max, _CMP_LE_OQ);
     ok = _mm512_mask_cmp_ps_mask(ok, _mm512_abs_ps(pz), max, _CMP_LE_OQ);
     ok &= lanes;
-    _mm_mask_storeu_epi8(valid + i, lanes, _mm_maskz_set1_epi8(ok, 1));
+    // The kept points to the cloud.
+    const __mmask16 append = out.keep_all ? lanes : ok;
+    const __m512 av = _mm512_maskz_loadu_ps(lanes, a + i);
+    const __m512 channel[6] = {
+        px, py, pz, av, _mm512_maskz_loadu_ps(lanes, in + i), _mm512_maskz_loadu_ps(lanes, dl + i)};
+    for (int j = 0; j < 6; ++j) {
+      _mm512_storeu_ps(out.channel[j] + kept, _mm512_maskz_compress_ps(append, channel[j]));
+    }
+    _mm256_storeu_si256(
+        reinterpret_cast<__m256i*>(out.flags + kept),
+        _mm512_cvtepi32_epi16(_mm512_maskz_compress_epi32(append, _mm512_cvtepu16_epi32(f))));
+    kept += static_cast<std::size_t>(__builtin_popcount(append));
     __mmask16 undecided;
     const __m512i c = Cells16(k, px, py, pz, ok, undecided);
     // Lanes that may have a cell: in one (c >= 0) or undecided.
@@ -322,7 +330,7 @@ TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
     }
     // Distance and amplitude words: d in the low half, a in the high half.
     const __m512i db = _mm512_castps_si512(di);
-    const __m512i ab = _mm512_castps_si512(_mm512_maskz_loadu_ps(lanes, a + i));
+    const __m512i ab = _mm512_castps_si512(av);
     _mm512_mask_storeu_epi64(da + i, static_cast<__mmask8>(lanes),
                              _mm512_permutex2var_epi32(db, interleave_lo, ab));
     _mm512_mask_storeu_epi64(da + i + 8, static_cast<__mmask8>(lanes >> 8),
@@ -510,8 +518,8 @@ TOFCAM_HOT_LOOP void PackFlags(std::size_t blocks, const std::uint8_t* __restric
 }
 
 // Appends points [0, n) of one chunk (n <= kChunk) at `n_out` of the merged cloud, whose arrays
-// have room for every point of every frame plus 8: the kept points (valid, or all with
-// keep_all) in input order. valid[i] is 0 or 1 (BasePoints), which the 8-bit masks rely on.
+// have room for every point of every frame plus 8 (16 are reserved): the kept points (valid, or all
+// with keep_all) in input order. valid[i] is 0 or 1 (BasePoints), which the 8-bit masks rely on.
 // Returns the new end.
 std::size_t AppendPoints(std::size_t n, bool keep_all, const float* bx, const float* by,
                          const float* bz, const float* a, const float* in, const float* dl,
@@ -574,7 +582,7 @@ TOFCAM_HOT_LOOP_WIDE void SplatInputs(std::size_t n, std::int32_t* __restrict ce
 }
 
 // Splat: the point nearest to the rotation centre wins its cell (the first of equals). Two
-// forms with the same result. Coarse pixels (up to kBranchFreePointsPerCell points of a frame
+// forms with the same result. Coarse pixels (fewer than kBranchFreePointsPerCell points of a frame
 // per cell of the strip, e.g. SR-2 and VGA frames on the default 0.5° strip): every point
 // rewrites its 16-byte cell branch-free, since neighbouring points compete for cells in an
 // order no branch predictor learns (points without a cell rewrite cell 0 with its own value:
@@ -597,8 +605,9 @@ void SplatBranchy(std::size_t n, const std::int32_t* __restrict cell, const doub
 using D2 = double __attribute__((vector_size(16)));
 using L2 = std::int64_t __attribute__((vector_size(16)));
 
-void Splat(std::size_t n, const std::int32_t* __restrict cell, const double* __restrict key,
-           const std::uint64_t* __restrict da, ZCell* __restrict zb) {
+TOFCAM_HOT_LOOP_WIDE void Splat(std::size_t n, const std::int32_t* __restrict cell,
+                                const double* __restrict key, const std::uint64_t* __restrict da,
+                                ZCell* __restrict zb) {
   for (std::size_t i = 0; i < n; ++i) {
     ZCell* __restrict z = zb + cell[i];
     D2 old;
@@ -615,16 +624,12 @@ void Splat(std::size_t n, const std::int32_t* __restrict cell, const double* __r
   }
 }
 
-// Every cell empty: key +inf, distance and amplitude NaN. As 64-bit words, so that the loop is
-// a vector store of a constant (an assign of ZCell records compiles to two scalar stores each).
+// Every cell empty: key +inf, distance and amplitude NaN. Each cell a copy of one constant
+// record, so that the loop is a vector store (an assign of ZCell records compiled to two scalar
+// stores each).
 TOFCAM_HOT_LOOP void ClearZBuffer(std::size_t n, ZCell* __restrict zb) {
-  const std::uint64_t key = std::bit_cast<std::uint64_t>(std::numeric_limits<double>::infinity());
-  const std::uint64_t da = PackDA(kNan, kNan);
-  auto* w = reinterpret_cast<std::uint64_t*>(zb);
-  for (std::size_t i = 0; i < n; ++i) {
-    w[2 * i] = key;
-    w[2 * i + 1] = da;
-  }
+  const ZCell empty{std::numeric_limits<double>::infinity(), PackDA(kNan, kNan)};
+  for (std::size_t i = 0; i < n; ++i) std::memcpy(zb + i, &empty, sizeof empty);
 }
 
 // The panorama's distance and amplitude from the cells' words.
@@ -763,8 +768,8 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   view.frame_offsets.push_back(0);
 
   // The merged cloud is written in place (room for every point of every frame, plus a block of
-  // eight for the append's vector stores), then trimmed.
-  std::size_t capacity = 8;
+  // 16 for the appends' whole-vector stores), then trimmed.
+  std::size_t capacity = 16;
   for (const MetricFrame& frame : frames) capacity += frame.radial_distance_m.size();
   PointCloud& out = view.cloud;
   for (auto* v : {&out.x, &out.y, &out.z, &out.amplitude, &out.intensity, &out.delta_l_m}) {
@@ -773,7 +778,8 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
   out.flags.resize(capacity);
   std::size_t n_out = 0;
   thread_local Scratch sc;
-  // The AVX-512 form fuses BasePoints, PanCells' float loop and SplatInputs (BaseCellsAvx512).
+  // The AVX-512 form fuses BasePoints, PanCells' float loop, SplatInputs and AppendPoints
+  // (BaseCellsAvx512).
 #if defined(TOFCAM_AVX512_FORMS)
   const bool fused = internal::UseAvx512Forms();
   const FloatStrip float_strip = ToFloatStrip(strip);
@@ -813,12 +819,20 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
       const std::size_t m = std::min(kChunk, n - b);
       if (fused) {
 #if defined(TOFCAM_AVX512_FORMS)
-        // Base points, cells and the splat's inputs in one pass; the undecided cells after.
+        // Base points, cells, the splat's inputs and the cloud in one pass; the undecided cells
+        // after.
+        const AppendAt at{{out.x.data() + n_out, out.y.data() + n_out, out.z.data() + n_out,
+                           out.amplitude.data() + n_out, out.intensity.data() + n_out,
+                           out.delta_l_m.data() + n_out},
+                          reinterpret_cast<std::uint16_t*>(out.flags.data()) + n_out,
+                          !o.only_valid};
+        std::size_t kept = 0;
         const std::uint32_t rechecks =
-            BaseCellsAvx512(m, d + b, flags + b, o.cloud.nan_mask, amplitude + b, rays.x.data() + b,
-                            rays.y.data() + b, rays.z.data() + b, rot.data(), tr.data(),
-                            float_strip, sc.bx.data(), sc.by.data(), sc.bz.data(), sc.valid.data(),
-                            sc.key.data(), sc.da.data(), sc.cell.data());
+            BaseCellsAvx512(m, d + b, flags + b, o.cloud.nan_mask, amplitude + b, intensity + b,
+                            delta_l + b, rays.x.data() + b, rays.y.data() + b, rays.z.data() + b,
+                            rot.data(), tr.data(), float_strip, sc.bx.data(), sc.by.data(),
+                            sc.bz.data(), sc.key.data(), sc.da.data(), sc.cell.data(), at, kept);
+        n_out += kept;
         std::int32_t* cell = sc.cell.data();
         double* key = sc.key.data();
         RecheckCells(m, strip, sc.bx.data(), sc.by.data(), sc.bz.data(), rechecks, cell,
@@ -835,10 +849,11 @@ void MakePanViewInto(std::span<const MetricFrame> frames, const RayTable& rays,
                            sc.cell.data());
         SplatInputs(m, sc.cell.data(), sc.range2.data(), d + b, amplitude + b, sc.key.data(),
                     sc.da.data());
+        n_out =
+            AppendPoints(m, !o.only_valid, sc.bx.data(), sc.by.data(), sc.bz.data(), amplitude + b,
+                         intensity + b, delta_l + b, flags + b, sc.valid.data(), n_out, out);
       }
-      n_out =
-          AppendPoints(m, !o.only_valid, sc.bx.data(), sc.by.data(), sc.bz.data(), amplitude + b,
-                       intensity + b, delta_l + b, flags + b, sc.valid.data(), n_out, out);
+
       // The z-buffered splat.
       (coarse ? Splat : SplatBranchy)(m, sc.cell.data(), sc.key.data(), sc.da.data(),
                                       zbuffer.data());
@@ -867,6 +882,8 @@ std::size_t PanCells(std::size_t n, const PanStrip& s, const float* x, const flo
                      const float* z, const std::uint8_t* valid, std::int32_t* cell) {
   const FloatStrip f = ToFloatStrip(s);
   std::size_t rechecks = 0;
+  // MakePanViewInto's AVX-512 form calls Cells16 itself (BaseCellsAvx512) and PanCells only
+  // without it; this branch runs Cells16 on PanCellsTest's points (borders, branch cut, axis).
 #if defined(TOFCAM_AVX512_FORMS)
   if (UseAvx512Forms()) {
     rechecks = FastCellsAvx512(n, f, x, y, z, valid, cell);

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -63,6 +64,35 @@ TEST(FastAtan2Test, FloatFormWithin1e6RadOfLibmOnItsInputs) {
   EXPECT_NEAR(FastAtan2F(0.0f, -1.0f), kPi, 1e-6);
   EXPECT_NEAR(FastAtan2F(-1e-30f, -1.0f), -kPi, 1e-6);
 }
+
+#if defined(TOFCAM_AVX512_FORMS)
+TOFCAM_AVX512_TARGET float MaxErrorOf16LaneForm(const std::vector<std::pair<double, double>>& in) {
+  double worst = 0.0;
+  for (std::size_t i = 0; i < in.size(); i += 16) {
+    float y[16] = {}, x[16] = {1.0f}, a[16];
+    const std::size_t n = std::min<std::size_t>(16, in.size() - i);
+    for (std::size_t j = 0; j < n; ++j) {
+      y[j] = static_cast<float>(in[i + j].first);
+      x[j] = static_cast<float>(in[i + j].second);
+    }
+    _mm512_storeu_ps(a, FastAtan2F16(_mm512_loadu_ps(y), _mm512_loadu_ps(x)));
+    for (std::size_t j = 0; j < n; ++j) {
+      const long double ref =
+          std::atan2(static_cast<long double>(y[j]), static_cast<long double>(x[j]));
+      worst = std::max(worst, static_cast<double>(std::abs(a[j] - ref)));
+    }
+  }
+  return static_cast<float>(worst);
+}
+
+TEST(FastAtan2Test, SixteenLaneFormWithin1e6RadOfLibm) {
+  if (!CpuHasAvx512()) GTEST_SKIP() << "no AVX-512 on this CPU";
+  // The pan view's cell pass uses this form (fused multiply-adds); its error bound relies on the
+  // same 1e-6 rad as FastAtan2F's.
+  EXPECT_LT(MaxErrorOf16LaneForm(Inputs()), 1e-6f);
+  EXPECT_LT(MaxErrorOf16LaneForm({{0.0, -1.0}, {-1e-30, -1.0}, {1.0, 0.0}}), 1e-6f);  // pi, -pi
+}
+#endif
 
 }  // namespace
 }  // namespace tofcam::internal

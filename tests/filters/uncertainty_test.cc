@@ -237,6 +237,53 @@ TEST(Uncertainty, AStepThatTiesTheThresholdIsNoEdge) {
   }
 }
 
+TEST(Uncertainty, ThresholdsWithinAnUlpOfTheStepFollowTheDefinition) {
+  // min_jump_sigma set to step / sqrt(s² + s_n²) and its neighbouring doubles, for random
+  // distances and ΔL: the step lies within an ulp of the threshold, where comparing squares
+  // without the band would decide some cases differently from the definition (asserted below, so
+  // that the test can fail when the band or the exact redo is missing).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> dist(1.0f, 3.0f), sigma(0.05f, 0.5f);
+  int squares_disagree = 0, edges = 0, cases = 0;
+  for (int i = 0; i < 3000; ++i) {
+    MetricFrame m;
+    m.radial_distance_m = Image<float>(2, 1);
+    m.delta_l_m = Image<float>(2, 1);
+    m.flags = Image<PixelFlags>(2, 1);
+    m.amplitude = Image<float>(2, 1, 1000.0f);
+    for (int k = 0; k < 2; ++k) {
+      m.radial_distance_m[k] = dist(rng);
+      m.delta_l_m[k] = sigma(rng);
+    }
+    const double s = m.delta_l_m[0], sn = m.delta_l_m[1];
+    const double step =
+        std::abs(static_cast<double>(m.radial_distance_m[1]) - m.radial_distance_m[0]);
+    if (step == 0.0) continue;
+    const double m0 = step / std::sqrt(s * s + sn * sn);
+    for (const double jump_sigma :
+         {std::nextafter(m0, 0.0), m0, std::nextafter(m0, std::numeric_limits<double>::max())}) {
+      const bool edge = step > jump_sigma * std::sqrt(s * s + sn * sn);  // the definition
+      squares_disagree += (step * step > jump_sigma * jump_sigma * (s * s + sn * sn)) != edge;
+      edges += edge;
+      ++cases;
+      const double e = edge ? 0.5 * step : 0.0;
+      const float expected = static_cast<float>(std::sqrt(s * s + e * e));
+      UncertaintyOptions o;
+      o.min_jump_sigma = jump_sigma;
+      for (const bool portable : {false, true}) {
+        const internal::PortableFormsForTesting forms(portable);
+        const float got = ComputeUncertainty(m, o)[0];
+        ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0)
+            << "case " << i << (portable ? " portable" : " AVX-512 if available") << ": step "
+            << step << ", min_jump_sigma " << jump_sigma;
+      }
+    }
+  }
+  EXPECT_GT(squares_disagree, 10);  // the band and the exact redo matter here
+  EXPECT_GT(edges, cases / 4);      // both outcomes occur
+  EXPECT_LT(edges, 3 * cases / 4);
+}
+
 TEST(Uncertainty, BadInputIsAClearError) {
   MetricFrame m = Row({1.0f}, 0.01f);
   m.delta_l_m = Image<float>();
