@@ -26,10 +26,10 @@ namespace {
 // the squared test is within a few units in the last place (1e-15) of its exact value, as is
 // each side of the exact test, so outside this band both tests agree; inside it lie ties in
 // practice (float inputs are 1e-7 apart). No square overflows (|d|, ΔL <= 3.4e38, m <= 100).
-// Where m² is subnormal (m < 1.5e-154) its relative error is larger, but then m² (s² + s_n²)
-// < 1e-230, far below the square of the smallest nonzero step (2^-149 squared, 1e-90): both
-// tests say edge. A zero step is never an edge (0 > x is false for x >= 0) and is not sent to
-// the exact test.
+// Where m² (s² + s_n²) is subnormal or zero (tiny m or ΔL) its relative error is larger, but it
+// is then below 2.3e-308, far below the square of the smallest nonzero step (2^-149 squared,
+// 1e-90), and so is the exact threshold's square: both tests say edge. A zero step is never an
+// edge (0 > x is false for x >= 0) and is not sent to the exact test.
 constexpr double kBand = 1e-12;
 
 // The edge test of one neighbour as the definition states it: step > min_jump_sigma x

@@ -275,7 +275,17 @@ TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
   const __m512i interleave_hi =
       _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
   std::uint32_t rechecks = 0;
-  kept = 0;
+  // The output pointers and count in locals: the stores may alias anything, so through `out` and
+  // `kept` every store would reload them.
+  float* __restrict const ox = out.channel[0];
+  float* __restrict const oy = out.channel[1];
+  float* __restrict const oz = out.channel[2];
+  float* __restrict const oa = out.channel[3];
+  float* __restrict const oi = out.channel[4];
+  float* __restrict const odl = out.channel[5];
+  std::uint16_t* __restrict const of = out.flags;
+  const bool keep_all = out.keep_all;
+  std::size_t appended = 0;
   for (std::size_t i = 0; i < n; i += 16) {
     const __mmask16 lanes = Lanes(n, i);
     const __m512 di = _mm512_maskz_loadu_ps(lanes, d + i);
@@ -298,17 +308,20 @@ TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
     ok = _mm512_mask_cmp_ps_mask(ok, _mm512_abs_ps(pz), max, _CMP_LE_OQ);
     ok &= lanes;
     // The kept points to the cloud.
-    const __mmask16 append = out.keep_all ? lanes : ok;
+    const __mmask16 append = keep_all ? lanes : ok;
     const __m512 av = _mm512_maskz_loadu_ps(lanes, a + i);
-    const __m512 channel[6] = {
-        px, py, pz, av, _mm512_maskz_loadu_ps(lanes, in + i), _mm512_maskz_loadu_ps(lanes, dl + i)};
-    for (int j = 0; j < 6; ++j) {
-      _mm512_storeu_ps(out.channel[j] + kept, _mm512_maskz_compress_ps(append, channel[j]));
-    }
+    _mm512_storeu_ps(ox + appended, _mm512_maskz_compress_ps(append, px));
+    _mm512_storeu_ps(oy + appended, _mm512_maskz_compress_ps(append, py));
+    _mm512_storeu_ps(oz + appended, _mm512_maskz_compress_ps(append, pz));
+    _mm512_storeu_ps(oa + appended, _mm512_maskz_compress_ps(append, av));
+    _mm512_storeu_ps(oi + appended,
+                     _mm512_maskz_compress_ps(append, _mm512_maskz_loadu_ps(lanes, in + i)));
+    _mm512_storeu_ps(odl + appended,
+                     _mm512_maskz_compress_ps(append, _mm512_maskz_loadu_ps(lanes, dl + i)));
     _mm256_storeu_si256(
-        reinterpret_cast<__m256i*>(out.flags + kept),
+        reinterpret_cast<__m256i*>(of + appended),
         _mm512_cvtepi32_epi16(_mm512_maskz_compress_epi32(append, _mm512_cvtepu16_epi32(f))));
-    kept += static_cast<std::size_t>(__builtin_popcount(append));
+    appended += static_cast<std::size_t>(__builtin_popcount(append));
     __mmask16 undecided;
     const __m512i c = Cells16(k, px, py, pz, ok, undecided);
     // Lanes that may have a cell: in one (c >= 0) or undecided.
@@ -337,6 +350,7 @@ TOFCAM_AVX512_TARGET std::uint32_t BaseCellsAvx512(
                              _mm512_permutex2var_epi32(db, interleave_hi, ab));
     rechecks += static_cast<std::uint32_t>(__builtin_popcount(undecided));
   }
+  kept = appended;
   return rechecks;
 }
 TOFCAM_AVX512_DIAGNOSTICS_END
