@@ -162,11 +162,10 @@ std::uint32_t UncertaintyRowAnyCpu(int w, double min_jump_sigma, double edge_fra
                         out, tie);
 }
 
-// UncertaintyRow's pixel c with the exact edge tests.
-void RedoPixel(int c, double min_jump_sigma, double edge_fraction, const float* d, const float* s,
-               const std::uint8_t* unknown, const float* du, const float* su,
-               const std::uint8_t* ku, const float* dd, const float* sd, const std::uint8_t* kd,
-               float* out) {
+// UncertaintyRow's pixel c with the exact edge tests: its u.
+float RedoPixel(int c, double min_jump_sigma, double edge_fraction, const float* d, const float* s,
+                const std::uint8_t* unknown, const float* du, const float* su,
+                const std::uint8_t* ku, const float* dd, const float* sd, const std::uint8_t* kd) {
   const double dc = d[c], sc = s[c];
   double edge = 0.0;
   const double dn[4] = {du[c], dd[c], d[c - 1], d[c + 1]};
@@ -176,10 +175,241 @@ void RedoPixel(int c, double min_jump_sigma, double edge_fraction, const float* 
     const bool edge_step = ExactEdgeStep(step, min_jump_sigma, sc, sn[k]);
     edge = std::max(edge, edge_step ? edge_fraction * step : 0.0);
   }
-  const bool unbounded = (ku[c] | kd[c] | unknown[c - 1] | unknown[c + 1]) != 0;
+  // Bit 0 only: UncertaintyFlags16's bytes carry more bits (kUnknownBit is bit 0).
+  const bool unbounded = ((ku[c] | kd[c] | unknown[c - 1] | unknown[c + 1]) & 1) != 0;
   const float u = static_cast<float>(std::sqrt(sc * sc + edge * edge));
-  out[c] = (dc == dc) && !unbounded ? u : std::numeric_limits<float>::infinity();
+  return (dc == dc) && !unbounded ? u : std::numeric_limits<float>::infinity();
 }
+
+#if defined(TOFCAM_AVX512_FORMS)
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
+// ---------------------------------------------------------------------------------------------
+// UncertaintyFilter's AVX-512 form: the flags straight from the frame in one pass over rows
+// (three padded rows in a ring instead of padded copies of the whole frame, no u image, no
+// separate flag pass), its tests in float, sixteen pixels at a time. Every decision equals the
+// double definition's: a float test decides only outside kFloatBand of its tie, and a pixel
+// with a test inside the band, or with an input outside the range the band's argument covers,
+// is redone with RedoPixel's exact tests.
+
+// Bits of the ring's per-pixel byte.
+constexpr std::uint8_t kUnknownBit = 1;   // carries one of unknown_neighbour_flags
+constexpr std::uint8_t kUnsafeBit = 2;    // usable, but a value outside the float form's range
+constexpr std::uint8_t kRejectedBit = 4;  // carries a reject flag
+
+// Relative half-width of the float tests' band. Each float test (step² against
+// m² (s² + s_n²) (1 ± band), u² = s² + fraction² max(step²) against max² (1 ± band)) carries at
+// most 9 float roundings (9 x 2^-24 = 5.4e-7 relative) against its exact value when the inputs
+// lie in the range below, and the double definition within 1e-15, so outside 1e-5 of a tie both
+// decide alike (an 18-fold margin). Inside it, RedoPixel decides.
+constexpr float kFloatBand = 1e-5f;
+
+// The range of a usable pixel's distance and ΔL (1e-10 <= |x| <= 1e15) in which no float square
+// or product of the tests overflows (steps <= 2e15, squares <= 4e30, times m² <= 1e4) and none
+// that can decide a test is subnormal (a nonzero step is >= 1e-17, its square >= 1e-34;
+// s² + s_n² >= 1e-20, times m² >= 1e-6). Pixels outside it (zero included, which real frames
+// do not have on a usable pixel), and their neighbours, take the exact tests.
+constexpr float kSmallest = 1e-10f, kLargest = 1e15f;
+
+// Whether the float form covers these options: m² >= 1e-6 (above), max² normal, and the edge
+// term's fraction 0 or not so small that fraction x step underflows.
+bool FloatFormCovers(const UncertaintyOptions& o) {
+  return !o.extrapolate_edges && o.min_jump_sigma >= 1e-3 && o.max_uncertainty_m >= 1e-10 &&
+         (o.edge_fraction == 0.0 || o.edge_fraction >= 1e-6);
+}
+
+TOFCAM_AVX512_INLINE __mmask16 Lanes16(int n) {
+  return n >= 16 ? __mmask16{0xffff} : static_cast<__mmask16>((1u << n) - 1u);
+}
+
+// Sixteen pixels of a padded ring row from a frame row: the distance where usable (NaN
+// otherwise), ΔL, and the byte of kUnknownBit / kUnsafeBit / kRejectedBit; stored at `pd`, `ps`,
+// `pk` and returned in `dv`, `sv`, `kv`. Masks are combined through compare and test write
+// masks (an AND for free) rather than mask-register logic, which GCC moves through general
+// registers.
+TOFCAM_AVX512_INLINE void Pad16(__mmask16 lanes, const float* d, const float* s,
+                                const PixelFlags* flags, std::uint16_t unknown_flags, float* pd,
+                                float* ps, std::uint8_t* pk, __m512& dv, __m512& sv, __m128i& kv) {
+  const __m512 raw = _mm512_maskz_loadu_ps(lanes, d);
+  sv = _mm512_maskz_loadu_ps(lanes, s);
+  const __m256i fv = _mm256_maskz_loadu_epi16(lanes, flags);
+  const __m512 da = _mm512_abs_ps(raw), sa = _mm512_abs_ps(sv);
+  const __m256i reject = _mm256_set1_epi16(static_cast<short>(kRejectMask));
+  const __mmask16 rejected = _mm256_test_epi16_mask(fv, reject);
+  // Not rejected, |d| and |ΔL| finite (ordered compares: false for NaN).
+  const __m512 inf = _mm512_set1_ps(std::numeric_limits<float>::infinity());
+  const __mmask16 usable = _mm512_mask_cmp_ps_mask(
+      _mm512_mask_cmp_ps_mask(_mm256_testn_epi16_mask(fv, reject), da, inf, _CMP_LT_OQ), sa, inf,
+      _CMP_LT_OQ);
+  // Usable with the smaller of |d|, |ΔL| below kSmallest or the larger above kLargest.
+  const __mmask16 unsafe = static_cast<__mmask16>(
+      _mm512_mask_cmp_ps_mask(usable, _mm512_min_ps(da, sa), _mm512_set1_ps(kSmallest),
+                              _CMP_LT_OQ) |
+      _mm512_mask_cmp_ps_mask(usable, _mm512_max_ps(da, sa), _mm512_set1_ps(kLargest), _CMP_GT_OQ));
+  dv = _mm512_mask_mov_ps(_mm512_set1_ps(std::numeric_limits<float>::quiet_NaN()), usable, raw);
+  const __mmask16 unknown =
+      _mm256_test_epi16_mask(fv, _mm256_set1_epi16(static_cast<short>(unknown_flags)));
+  kv = _mm_maskz_set1_epi8(unknown, kUnknownBit);
+  kv = _mm_mask_add_epi8(kv, unsafe, kv, _mm_set1_epi8(kUnsafeBit));
+  kv = _mm_mask_add_epi8(kv, rejected, kv, _mm_set1_epi8(kRejectedBit));
+  _mm512_mask_storeu_ps(pd, lanes, dv);
+  _mm512_mask_storeu_ps(ps, lanes, sv);
+  _mm_mask_storeu_epi8(pk, lanes, kv);
+}
+
+// One padded ring row from a frame row (Pad16 over the row).
+TOFCAM_AVX512_TARGET void PadRow16(int w, const float* d, const float* s, const PixelFlags* flags,
+                                   std::uint16_t unknown_flags, float* pd, float* ps,
+                                   std::uint8_t* pk) {
+  for (int c = 0; c < w; c += 16) {
+    __m512 dv, sv;
+    __m128i kv;
+    Pad16(Lanes16(w - c), d + c, s + c, flags + c, unknown_flags, pd + c, ps + c, pk + c, dv, sv,
+          kv);
+  }
+}
+
+// A frame row and the ring row it is padded into.
+struct RowIn {
+  const float* d;
+  const float* s;
+  const PixelFlags* flags;
+  float* pd;
+  float* ps;
+  std::uint8_t* pk;
+};
+
+// kLowConfidence of one row: the float tests of UncertaintyRow on three padded ring rows, the
+// row (`d`, `s`, `k`) and the one above (`du`, `su`, `ku`) padded before, the one below padded
+// from the frame in the same loop (`below`; its `d`... null below the last row, whose padding
+// `pd`... is read instead), so that the frame's reads overlap the arithmetic. Pixels to redo
+// exactly get tie[c] = 1; returns how many.
+//
+// Per neighbour: s2 = step² against r2 = m² (s² + s_n²) scaled by 1 ± kFloatBand (the scale
+// folded into m²); an edge where s2 > r2 (1 + band), none where !(s2 >= r2 (1 - band)) (also for
+// a NaN step: an unusable neighbour), near a tie otherwise. The edge term is fraction x the
+// largest edge step, so u² = s² + fraction² max(s2) (fraction >= 0: the largest product is the
+// product with the largest step, as in the double definition).
+TOFCAM_AVX512_TARGET std::uint32_t FlagRow16(
+    int w, float m2, float fraction, float max2, std::uint16_t unknown_flags,
+    const float* __restrict d, const float* __restrict s, const std::uint8_t* __restrict k,
+    const float* __restrict du, const float* __restrict su, const std::uint8_t* __restrict ku,
+    const RowIn& below, PixelFlags* __restrict out, std::uint8_t* __restrict tie) {
+  const __m512 m2_above = _mm512_set1_ps(m2 * (1.0f + kFloatBand));
+  const __m512 m2_below = _mm512_set1_ps(m2 * (1.0f - kFloatBand));
+  const __m512 fraction2 = _mm512_set1_ps(fraction * fraction);
+  const __m512 max_above = _mm512_set1_ps(max2 * (1.0f + kFloatBand));
+  const __m512 max_below = _mm512_set1_ps(max2 * (1.0f - kFloatBand));
+  const __m256i low_bit = _mm256_set1_epi16(static_cast<short>(Flag::kLowConfidence));
+  const __m512 one = _mm512_set1_ps(1.0f);
+  std::uint32_t ties = 0;
+  for (int c = 0; c < w; c += 16) {
+    const __mmask16 lanes = Lanes16(w - c);
+    __m512 dd, sd;
+    __m128i kd;
+    if (below.d != nullptr) {
+      Pad16(lanes, below.d + c, below.s + c, below.flags + c, unknown_flags, below.pd + c,
+            below.ps + c, below.pk + c, dd, sd, kd);
+    } else {
+      dd = _mm512_maskz_loadu_ps(lanes, below.pd + c);
+      sd = _mm512_maskz_loadu_ps(lanes, below.ps + c);
+      kd = _mm_maskz_loadu_epi8(lanes, below.pk + c);
+    }
+    const __m512 dc = _mm512_maskz_loadu_ps(lanes, d + c), sc = _mm512_maskz_loadu_ps(lanes, s + c);
+    const __m512 sc2 = _mm512_mul_ps(sc, sc);
+    __m512 edge2 = _mm512_setzero_ps();  // largest squared edge step
+    // Nonzero where the pixel is to be redone exactly: a test near its tie, an unsafe value
+    // among the five pixels, u near the threshold (kept in a vector: see Pad16).
+    __m512 redo_v = _mm512_setzero_ps();
+    const __m512 dn[4] = {_mm512_maskz_loadu_ps(lanes, du + c), dd,
+                          _mm512_maskz_loadu_ps(lanes, d + c - 1),
+                          _mm512_maskz_loadu_ps(lanes, d + c + 1)};
+    const __m512 sn[4] = {_mm512_maskz_loadu_ps(lanes, su + c), sd,
+                          _mm512_maskz_loadu_ps(lanes, s + c - 1),
+                          _mm512_maskz_loadu_ps(lanes, s + c + 1)};
+    for (int n = 0; n < 4; ++n) {
+      const __m512 step = _mm512_sub_ps(dn[n], dc);
+      const __m512 s2 = _mm512_mul_ps(step, step);
+      const __m512 sum = _mm512_fmadd_ps(sn[n], sn[n], sc2);
+      const __m512 r2_above = _mm512_mul_ps(m2_above, sum), r2_below = _mm512_mul_ps(m2_below, sum);
+      const __mmask16 yes = _mm512_cmp_ps_mask(s2, r2_above, _CMP_GT_OQ);
+      edge2 = _mm512_mask_max_ps(edge2, yes, edge2, s2);
+      // r2 (1 - band) <= s2 <= r2 (1 + band) (false for a NaN step: an unusable neighbour).
+      const __mmask16 near = _mm512_mask_cmp_ps_mask(_mm512_cmp_ps_mask(s2, r2_above, _CMP_LE_OQ),
+                                                     s2, r2_below, _CMP_GE_OQ);
+      redo_v = _mm512_mask_mov_ps(redo_v, near, one);
+    }
+    const __m128i kc = _mm_maskz_loadu_epi8(lanes, k + c);
+    const __m128i around = _mm_or_si128(_mm_or_si128(_mm_maskz_loadu_epi8(lanes, ku + c), kd),
+                                        _mm_or_si128(_mm_maskz_loadu_epi8(lanes, k + c - 1),
+                                                     _mm_maskz_loadu_epi8(lanes, k + c + 1)));
+    redo_v = _mm512_mask_mov_ps(
+        redo_v, _mm_test_epi8_mask(_mm_or_si128(around, kc), _mm_set1_epi8(kUnsafeBit)), one);
+    // Judged (in the row, not rejected), and of those the ones with a finite u: a usable centre
+    // (its distance not NaN) without an unknown neighbour.
+    const __mmask16 judged = _mm_mask_testn_epi8_mask(lanes, kc, _mm_set1_epi8(kRejectedBit));
+    const __mmask16 finite = _mm512_mask_cmp_ps_mask(
+        _mm_mask_testn_epi8_mask(judged, around, _mm_set1_epi8(kUnknownBit)), dc, dc, _CMP_ORD_Q);
+    const __m512 u2 = _mm512_fmadd_ps(fraction2, edge2, sc2);
+    const __mmask16 close = _mm512_mask_cmp_ps_mask(_mm512_cmp_ps_mask(u2, max_above, _CMP_LE_OQ),
+                                                    u2, max_below, _CMP_GE_OQ);
+    redo_v = _mm512_mask_mov_ps(redo_v, close, one);
+    const __mmask16 redo =
+        _mm512_mask_cmp_ps_mask(finite, redo_v, _mm512_setzero_ps(), _CMP_NEQ_OQ);
+    // Redone pixels are overwritten by the caller.
+    const __mmask16 low = static_cast<__mmask16>(
+        _kandn_mask16(finite, judged) | _mm512_mask_cmp_ps_mask(finite, u2, max_above, _CMP_GT_OQ));
+    _mm256_mask_storeu_epi16(out + c, lanes, _mm256_maskz_mov_epi16(low, low_bit));
+    _mm_mask_storeu_epi8(tie + c, lanes, _mm_maskz_set1_epi8(redo, 1));
+    ties += static_cast<std::uint32_t>(__builtin_popcount(redo));
+  }
+  return ties;
+}
+
+// UncertaintyFilter's AVX-512 form (FloatFormCovers(options), frame checked).
+Image<PixelFlags> UncertaintyFlags16(const MetricFrame& frame, const UncertaintyOptions& options) {
+  const int w = frame.width(), h = frame.height();
+  const std::size_t pw = static_cast<std::size_t>(w) + 2;
+  // Four ring rows: three in use and an all-padding row above the first and below the last.
+  thread_local std::vector<float> pd, ps;
+  thread_local std::vector<std::uint8_t> pk, tie;
+  pd.assign(4 * pw, std::numeric_limits<float>::quiet_NaN());
+  ps.assign(4 * pw, 0.0f);
+  pk.assign(4 * pw, 0);
+  tie.resize(static_cast<std::size_t>(w));
+  const auto ring = [&](int r) {
+    return (r < 0 || r >= h) ? 3 * pw + 1 : static_cast<std::size_t>(r % 3) * pw + 1;
+  };
+  const double m = options.min_jump_sigma;
+  const auto m2 = static_cast<float>(m * m);
+  const auto max = static_cast<float>(options.max_uncertainty_m);
+  const std::uint16_t unknown = options.unknown_neighbour_flags;
+  Image<PixelFlags> out(w, h);
+  PadRow16(w, frame.radial_distance_m.Row(0).data(), frame.delta_l_m.Row(0).data(),
+           frame.flags.Row(0).data(), unknown, &pd[ring(0)], &ps[ring(0)], &pk[ring(0)]);
+  for (int r = 0; r < h; ++r) {
+    const std::size_t up = ring(r - 1), mid = ring(r), down = ring(r + 1);
+    RowIn below{nullptr, nullptr, nullptr, &pd[down], &ps[down], &pk[down]};
+    if (r + 1 < h) {
+      below.d = frame.radial_distance_m.Row(r + 1).data();
+      below.s = frame.delta_l_m.Row(r + 1).data();
+      below.flags = frame.flags.Row(r + 1).data();
+    }
+    PixelFlags* row = out.Row(r).data();
+    const std::uint32_t ties =
+        FlagRow16(w, m2, static_cast<float>(options.edge_fraction), max * max, unknown, &pd[mid],
+                  &ps[mid], &pk[mid], &pd[up], &ps[up], &pk[up], below, row, tie.data());
+    for (int c = 0; ties > 0 && c < w; ++c) {
+      if (tie[static_cast<std::size_t>(c)] == 0) continue;
+      const float u = RedoPixel(c, m, options.edge_fraction, &pd[mid], &ps[mid], &pk[mid], &pd[up],
+                                &ps[up], &pk[up], &pd[down], &ps[down], &pk[down]);
+      row[c] = PixelFlags(static_cast<std::uint16_t>(
+          u <= max ? 0 : static_cast<std::uint16_t>(Flag::kLowConfidence)));
+    }
+  }
+  return out;
+}
+TOFCAM_AVX512_DIAGNOSTICS_END
+#endif
 
 // One row of the padded inputs of UncertaintyRow: the distance where the pixel is usable (no
 // reject flag, finite distance and ΔL; NaN otherwise), ΔL, and the unknown-neighbour mask.
@@ -223,13 +453,22 @@ void UncertaintyOptions::Validate() const {
   }
 }
 
-Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptions& options) {
+namespace {
+
+void CheckInput(const MetricFrame& frame, const UncertaintyOptions& options) {
   options.Validate();
   const int w = frame.width(), h = frame.height();
   if (w <= 0 || h <= 0) Bad("uncertainty: empty frame");
   if (!frame.delta_l_m.SameSize(w, h) || !frame.flags.SameSize(w, h)) {
     Bad("uncertainty: the frame needs ΔL and flags of its size (enable the accuracy stage)");
   }
+}
+
+}  // namespace
+
+Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptions& options) {
+  CheckInput(frame, options);
+  const int w = frame.width(), h = frame.height();
   constexpr float kInf = std::numeric_limits<float>::infinity();
   auto usable = [&](std::size_t i) {
     return !frame.flags[i].Any(kRejectMask) && std::isfinite(frame.radial_distance_m[i]) &&
@@ -275,8 +514,8 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
           &ps[up], &pk[up], &pd[down], &ps[down], &pk[down], row, tie.data());
       for (int c = 0; ties > 0 && c < w; ++c) {
         if (tie[static_cast<std::size_t>(c)] == 0) continue;
-        RedoPixel(c, options.min_jump_sigma, options.edge_fraction, &pd[mid], &ps[mid], &pk[mid],
-                  &pd[up], &ps[up], &pk[up], &pd[down], &ps[down], &pk[down], row);
+        row[c] = RedoPixel(c, options.min_jump_sigma, options.edge_fraction, &pd[mid], &ps[mid],
+                           &pk[mid], &pd[up], &ps[up], &pk[up], &pd[down], &ps[down], &pk[down]);
       }
     }
     return out;
@@ -318,6 +557,12 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
 }
 
 Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame, const UncertaintyOptions& options) {
+#if defined(TOFCAM_AVX512_FORMS)
+  if (internal::UseAvx512Forms() && FloatFormCovers(options)) {
+    CheckInput(frame, options);
+    return UncertaintyFlags16(frame, options);
+  }
+#endif
   const Image<float> u = ComputeUncertainty(frame, options);
   Image<PixelFlags> out(frame.width(), frame.height());
   // Rejected pixels (u = inf) already carry their reason; the others are judged (u = inf

@@ -26,6 +26,39 @@ MetricFrame Row(std::initializer_list<float> d, float sigma) {
   return m;
 }
 
+// u of pixel (r, c) as the header defines it (default form, no extrapolated edges), straight
+// from the frame in double.
+float DefinitionU(const MetricFrame& m, int r, int c, const UncertaintyOptions& o) {
+  const int w = m.width(), h = m.height();
+  auto usable = [&](int rr, int cc) {
+    return !m.flags(rr, cc).Any(kRejectMask) && std::isfinite(m.radial_distance_m(rr, cc)) &&
+           std::isfinite(m.delta_l_m(rr, cc));
+  };
+  if (!usable(r, c)) return std::numeric_limits<float>::infinity();
+  const double d = m.radial_distance_m(r, c), s = m.delta_l_m(r, c);
+  double jump = 0.0;
+  for (const auto& [dr, dc] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
+    const int rr = r + dr, cc = c + dc;
+    if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
+    if (m.flags(rr, cc).Any(o.unknown_neighbour_flags)) {
+      return std::numeric_limits<float>::infinity();
+    }
+    if (!usable(rr, cc)) continue;
+    const double step = std::abs(static_cast<double>(m.radial_distance_m(rr, cc)) - d);
+    const double sj = m.delta_l_m(rr, cc);
+    if (step > o.min_jump_sigma * std::sqrt(s * s + sj * sj)) jump = std::max(jump, step);
+  }
+  const double edge = o.edge_fraction * jump;
+  return static_cast<float>(std::sqrt(s * s + edge * edge));
+}
+
+// The filter's flag as the header defines it: kLowConfidence on a pixel without a reject flag
+// whose u is above the threshold (as a float, the type of u).
+bool DefinitionLow(const MetricFrame& m, int r, int c, const UncertaintyOptions& o) {
+  return !m.flags(r, c).Any(kRejectMask) &&
+         !(DefinitionU(m, r, c, o) <= static_cast<float>(o.max_uncertainty_m));
+}
+
 TEST(Uncertainty, EdgesAddHalfTheirJump) {
   // 1.0, 1.0 | 2.0: the pixels next to the 1 m step get sqrt(0.01² + 0.5²); the first one only
   // its noise. A 2 cm step is below 3 sqrt(2) σ = 4.2 cm: noise, not an edge.
@@ -164,31 +197,11 @@ TEST(Uncertainty, RowsEqualTheDefinitionForEverySizeAndPattern) {
       SCOPED_TRACE(portable ? "portable" : "AVX-512 if available");
       const internal::PortableFormsForTesting forms(portable);
       const Image<float> got = ComputeUncertainty(m, o);
-      auto usable = [&](int r, int c) {
-        return !m.flags(r, c).Any(kRejectMask) && std::isfinite(m.radial_distance_m(r, c)) &&
-               std::isfinite(m.delta_l_m(r, c));
-      };
       for (int r = 0; r < h; ++r) {
         for (int c = 0; c < w; ++c) {
-          float expected = kInf;
-          if (usable(r, c)) {
-            const double d = m.radial_distance_m(r, c), s = m.delta_l_m(r, c);
-            double jump = 0.0;
-            bool unknown = false;
-            for (const auto& [dr, dc] : {std::pair{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
-              const int rr = r + dr, cc = c + dc;
-              if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
-              unknown |= m.flags(rr, cc).Any(o.unknown_neighbour_flags);
-              if (!usable(rr, cc)) continue;
-              const double step = std::abs(static_cast<double>(m.radial_distance_m(rr, cc)) - d);
-              const double sj = m.delta_l_m(rr, cc);
-              if (step > o.min_jump_sigma * std::sqrt(s * s + sj * sj)) jump = std::max(jump, step);
-            }
-            const double edge = o.edge_fraction * jump;
-            if (!unknown) expected = static_cast<float>(std::sqrt(s * s + edge * edge));
-            finite += !portable && !unknown;
-            edges += !portable && !unknown && jump > 0.0;
-          }
+          const float expected = DefinitionU(m, r, c, o);
+          finite += !portable && expected < kInf;
+          edges += !portable && expected < kInf && expected != m.delta_l_m(r, c);
           ASSERT_EQ(std::memcmp(&got(r, c), &expected, sizeof expected), 0)
               << w << "x" << h << " at (" << r << ", " << c << "): " << got(r, c) << " vs "
               << expected;
@@ -197,9 +210,11 @@ TEST(Uncertainty, RowsEqualTheDefinitionForEverySizeAndPattern) {
       // The filter flags exactly the usable pixels above the threshold (and those next to a
       // clipped one).
       const Image<PixelFlags> flags = UncertaintyFilter(m, o);
-      for (std::size_t i = 0; i < flags.size(); ++i) {
-        const bool low = !m.flags[i].Any(kRejectMask) && !(got[i] <= o.max_uncertainty_m);
-        EXPECT_EQ(flags[i].Has(Flag::kLowConfidence), low) << i;
+      for (int r = 0; r < h; ++r) {
+        for (int c = 0; c < w; ++c) {
+          EXPECT_EQ(flags(r, c).Has(Flag::kLowConfidence), DefinitionLow(m, r, c, o))
+              << w << "x" << h << " at (" << r << ", " << c << ")";
+        }
       }
     }
   }
@@ -270,10 +285,15 @@ TEST(Uncertainty, ThresholdsWithinAnUlpOfTheStepFollowTheDefinition) {
       const float expected = static_cast<float>(std::sqrt(s * s + e * e));
       UncertaintyOptions o;
       o.min_jump_sigma = jump_sigma;
+      // A threshold between u without and with the edge term, so that the flag is the edge test.
+      o.max_uncertainty_m = std::sqrt(s * s + 0.125 * step * step);
       for (const bool portable : {false, true}) {
         const internal::PortableFormsForTesting forms(portable);
         const float got = ComputeUncertainty(m, o)[0];
         ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0)
+            << "case " << i << (portable ? " portable" : " AVX-512 if available") << ": step "
+            << step << ", min_jump_sigma " << jump_sigma;
+        ASSERT_EQ(UncertaintyFilter(m, o)[0].Has(Flag::kLowConfidence), edge)
             << "case " << i << (portable ? " portable" : " AVX-512 if available") << ": step "
             << step << ", min_jump_sigma " << jump_sigma;
       }
@@ -282,6 +302,115 @@ TEST(Uncertainty, ThresholdsWithinAnUlpOfTheStepFollowTheDefinition) {
   EXPECT_GT(squares_disagree, 10);  // the band and the exact redo matter here
   EXPECT_GT(edges, cases / 4);      // both outcomes occur
   EXPECT_LT(edges, 3 * cases / 4);
+}
+
+TEST(Uncertainty, FlagsAtThresholdsWithinAnUlpOfUFollowTheDefinition) {
+  // Two pixels a clear edge apart; max_uncertainty_m set to the first pixel's u and to the floats
+  // next to it, so that u <= max decides by one ulp. The filter's AVX-512 form tests u² against
+  // max² in float, where these cases lie in the band it leaves to the exact test; the float
+  // squares alone would decide some of them differently (asserted, so that the test can fail
+  // when the band or the redo is missing).
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> dist(1.0f, 2.0f), sigma(0.01f, 0.05f);
+  int float_disagrees = 0, lows = 0, cases = 0;
+  for (int i = 0; i < 3000; ++i) {
+    MetricFrame m;
+    m.radial_distance_m = Image<float>(2, 1);
+    m.delta_l_m = Image<float>(2, 1);
+    m.flags = Image<PixelFlags>(2, 1);
+    m.amplitude = Image<float>(2, 1, 1000.0f);
+    m.radial_distance_m[0] = dist(rng);
+    m.radial_distance_m[1] = m.radial_distance_m[0] + 1.0f + dist(rng);
+    m.delta_l_m[0] = sigma(rng);
+    m.delta_l_m[1] = sigma(rng);
+    UncertaintyOptions o;
+    const float u = DefinitionU(m, 0, 0, o);
+    const float step = m.radial_distance_m[1] - m.radial_distance_m[0];
+    const float s = m.delta_l_m[0];
+    for (const float max : {std::nextafter(u, 0.0f), u, std::nextafter(u, 100.0f)}) {
+      o.max_uncertainty_m = max;
+      const bool low = DefinitionLow(m, 0, 0, o);
+      lows += low;
+      ++cases;
+      float_disagrees += (std::fma(0.25f, step * step, s * s) > max * max) != low;
+      for (const bool portable : {false, true}) {
+        const internal::PortableFormsForTesting forms(portable);
+        ASSERT_EQ(UncertaintyFilter(m, o)[0].Has(Flag::kLowConfidence), low)
+            << "case " << i << (portable ? " portable" : " AVX-512 if available") << ": u " << u
+            << ", max " << max;
+      }
+    }
+  }
+  EXPECT_GT(float_disagrees, 10);
+  EXPECT_GT(lows, cases / 4);  // both outcomes occur
+  EXPECT_LT(lows, 3 * cases / 4);
+}
+
+TEST(Uncertainty, ExtremeValuesAndOptionsFollowTheDefinition) {
+  // Distances and ΔL from zero and subnormals to the float maximum, NaN and inf among them, and
+  // options at and beyond the limits of the filter's float form (which leaves values outside
+  // 1e-10..1e15 and such options to the exact tests): both forms give the definition's u and
+  // flags.
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  const float magnitudes[] = {0.0f, 1e-40f, 1e-30f, 1e-12f, 5e-11f, 1e-10f, 0.003f, 0.02f, 1.0f,
+                              2.5f, 7.0f,   1e14f,  1e15f,  2e15f,  1e20f,  3e38f,  kInf};
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> pick(0, static_cast<int>(std::size(magnitudes)) - 1);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<UncertaintyOptions> options(9);
+  options[1].min_jump_sigma = 1e-3;
+  options[2].min_jump_sigma = 5e-4;
+  options[3].max_uncertainty_m = 1e-10;
+  options[4].max_uncertainty_m = 100.0;
+  options[5].edge_fraction = 1e-6;
+  options[6].edge_fraction = 0.0;
+  options[7].edge_fraction = 1.0;
+  options[8].unknown_neighbour_flags = static_cast<std::uint16_t>(Flag::kSaturated);
+  int lows = 0, judged = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const int w = 37, h = 9;
+    MetricFrame m;
+    m.radial_distance_m = Image<float>(w, h);
+    m.amplitude = Image<float>(w, h, 1000.0f);
+    m.flags = Image<PixelFlags>(w, h);
+    m.delta_l_m = Image<float>(w, h);
+    for (std::size_t i = 0; i < m.flags.size(); ++i) {
+      // Most pixels ordinary (a surface at 1-2 m with ΔL of 1-5 cm), the rest extreme.
+      const bool ordinary = u(rng) < 0.5f;
+      m.radial_distance_m[i] = ordinary ? 1.0f + u(rng) : magnitudes[pick(rng)];
+      m.delta_l_m[i] = ordinary ? 0.01f + 0.04f * u(rng) : magnitudes[pick(rng)];
+      const float roll = u(rng);
+      if (roll < 0.1f) m.radial_distance_m[i] = -m.radial_distance_m[i];
+      if (roll > 0.1f && roll < 0.13f) m.delta_l_m[i] = std::numeric_limits<float>::quiet_NaN();
+      if (roll > 0.13f && roll < 0.16f) m.flags[i] = PixelFlags(Flag::kSaturated);
+      if (roll > 0.16f && roll < 0.19f) m.flags[i] = PixelFlags(Flag::kLowAmplitude);
+    }
+    for (std::size_t k = 0; k < options.size(); ++k) {
+      const UncertaintyOptions& o = options[k];
+      for (const bool portable : {false, true}) {
+        const internal::PortableFormsForTesting forms(portable);
+        const Image<float> got_u = ComputeUncertainty(m, o);
+        const Image<PixelFlags> got = UncertaintyFilter(m, o);
+        for (int r = 0; r < h; ++r) {
+          for (int c = 0; c < w; ++c) {
+            const float expected = DefinitionU(m, r, c, o);
+            ASSERT_EQ(std::memcmp(&got_u(r, c), &expected, sizeof expected), 0)
+                << "trial " << trial << ", options " << k << (portable ? ", portable" : "")
+                << " at (" << r << ", " << c << ")";
+            const bool low = DefinitionLow(m, r, c, o);
+            ASSERT_EQ(got(r, c).Has(Flag::kLowConfidence), low)
+                << "trial " << trial << ", options " << k << (portable ? ", portable" : "")
+                << " at (" << r << ", " << c << "): d " << m.radial_distance_m(r, c) << ", ΔL "
+                << m.delta_l_m(r, c) << ", u " << expected;
+            lows += low;
+            judged += !m.flags(r, c).Any(kRejectMask);
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(lows, judged / 10);  // both outcomes occur
+  EXPECT_LT(lows, 9 * judged / 10);
 }
 
 TEST(Uncertainty, BadInputIsAClearError) {
