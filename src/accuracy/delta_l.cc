@@ -76,8 +76,8 @@ namespace {
 
 // ΔL = k sqrt(I) / A, computed for every pixel and then selected, so the loop has no branch and
 // vectorises. An x86-64-v4 clone too: its square root and division run 16 lanes wide on AVX-512
-// CPUs (no multiply-add to contract, so the same values; the paper chain at SR-2 measured 8 %
-// faster on a Zen 5, pipeline_bench, docs/benchmarks.md).
+// CPUs (a multiply, a square root and a division, built without contraction: the same values;
+// the paper chain at SR-2 measured 8 % faster on a Zen 5, pipeline_bench, docs/benchmarks.md).
 TOFCAM_HOT_LOOP_WIDE void DeltaLLoop(std::size_t n, float k, const float* __restrict a,
                                      const float* __restrict in, float* __restrict o) {
   constexpr float kInf = std::numeric_limits<float>::infinity();

@@ -159,8 +159,8 @@ template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy>
 }
 
 // x86-64-v4 clones too: on a Zen 5 the single-filter rows (amplitude, range) at SR-2 went from
-// 9.2 to 6.3 times their memcpy floor (`tofcam bench`, two alternated pairs; compares only, so
-// the same flags).
+// 9.2 to 6.3 times their memcpy floor (`tofcam bench`, two alternated pairs). Compares and one
+// add, built without contraction: the same flags in every clone.
 #define TOFCAM_FUSED_FILTERS(name, r, a, s, c)                                           \
   TOFCAM_HOT_LOOP_WIDE void name(std::size_t n, const kernels::PixelFilterPlan& l,       \
                                  const float* __restrict d, const float* __restrict am,  \

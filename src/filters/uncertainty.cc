@@ -196,16 +196,17 @@ constexpr std::uint8_t kUnknownBit = 1;   // carries one of unknown_neighbour_fl
 constexpr std::uint8_t kUnsafeBit = 2;    // usable, but a value outside the float form's range
 constexpr std::uint8_t kRejectedBit = 4;  // carries a reject flag
 
-// Relative half-width of the float tests' band. Each float test (step² against
-// m² (s² + s_n²) (1 ± band), u² = s² + fraction² max(step²) against max² (1 ± band)) carries at
-// most 9 float roundings (9 x 2^-24 = 5.4e-7 relative) against its exact value when the inputs
-// lie in the range below, and the double definition within 1e-15, so outside 1e-5 of a tie both
-// decide alike (an 18-fold margin). Inside it, RedoPixel decides.
+// Relative half-width of the float tests' band. The edge test (step² against
+// m² (s² + s_n²) (1 ± band)) carries at most 8 float roundings against its exact value when the
+// inputs lie in the range below; the threshold test (u² = s² + fraction² max(step²) against
+// max² (1 ± band), where the definition rounds u to float first) at most 11, 6.6e-7 relative.
+// The double definition is within 1e-15, so outside 1e-5 of a tie both decide alike (a 15-fold
+// margin). Inside it, RedoPixel decides.
 constexpr float kFloatBand = 1e-5f;
 
 // The range of a usable pixel's distance and ΔL (1e-10 <= |x| <= 1e15) in which no float square
 // or product of the tests overflows (steps <= 2e15, squares <= 4e30, times m² <= 1e4) and none
-// that can decide a test is subnormal (a nonzero step is >= 1e-17, its square >= 1e-34;
+// that can decide a test is subnormal (a nonzero step is >= 2^-57 = 6.9e-18, its square 4.8e-35;
 // s² + s_n² >= 1e-20, times m² >= 1e-6). Pixels outside it (zero included, which real frames
 // do not have on a usable pixel), and their neighbours, take the exact tests.
 constexpr float kSmallest = 1e-10f, kLargest = 1e15f;

@@ -26,6 +26,24 @@ MetricFrame Row(std::initializer_list<float> d, float sigma) {
   return m;
 }
 
+// A w x h frame of zeros with ΔL and no flags, amplitude 1000.
+MetricFrame Blank(int w, int h) {
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(w, h);
+  m.amplitude = Image<float>(w, h, 1000.0f);
+  m.flags = Image<PixelFlags>(w, h);
+  m.delta_l_m = Image<float>(w, h);
+  return m;
+}
+
+// A row of pixels with the given distances and ΔL (sizes equal), m.
+MetricFrame Pixels(std::initializer_list<float> d, std::initializer_list<float> sigma) {
+  MetricFrame m = Row(d, 0.0f);
+  int i = 0;
+  for (float v : sigma) m.delta_l_m[i++] = v;
+  return m;
+}
+
 // u of pixel (r, c) as the header defines it (default form, no extrapolated edges), straight
 // from the frame in double.
 float DefinitionU(const MetricFrame& m, int r, int c, const UncertaintyOptions& o) {
@@ -172,13 +190,9 @@ TEST(Uncertainty, RowsEqualTheDefinitionForEverySizeAndPattern) {
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   constexpr float kInf = std::numeric_limits<float>::infinity();
   int finite = 0, edges = 0;
-  for (const auto& [w, h] :
-       std::vector<std::pair<int, int>>{{1, 1}, {2, 3}, {5, 1}, {7, 6}, {16, 4}, {37, 9}}) {
-    MetricFrame m;
-    m.radial_distance_m = Image<float>(w, h);
-    m.amplitude = Image<float>(w, h, 1000.0f);
-    m.flags = Image<PixelFlags>(w, h);
-    m.delta_l_m = Image<float>(w, h);
+  for (const auto& [w, h] : std::vector<std::pair<int, int>>{
+           {1, 1}, {2, 3}, {5, 1}, {7, 6}, {16, 4}, {17, 2}, {32, 3}, {33, 2}, {37, 9}}) {
+    MetricFrame m = Blank(w, h);
     for (std::size_t i = 0; i < m.flags.size(); ++i) {
       m.radial_distance_m[i] =
           1.0f + 0.5f * static_cast<float>(static_cast<int>(u(rng) * 3)) + 0.01f * u(rng);
@@ -259,17 +273,10 @@ TEST(Uncertainty, ThresholdsWithinAnUlpOfTheStepFollowTheDefinition) {
   // that the test can fail when the band or the exact redo is missing).
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> dist(1.0f, 3.0f), sigma(0.05f, 0.5f);
-  int squares_disagree = 0, edges = 0, cases = 0;
+  int squares_disagree = 0, edges = 0, cases = 0, flag_is_edge = 0;
   for (int i = 0; i < 3000; ++i) {
-    MetricFrame m;
-    m.radial_distance_m = Image<float>(2, 1);
-    m.delta_l_m = Image<float>(2, 1);
-    m.flags = Image<PixelFlags>(2, 1);
-    m.amplitude = Image<float>(2, 1, 1000.0f);
-    for (int k = 0; k < 2; ++k) {
-      m.radial_distance_m[k] = dist(rng);
-      m.delta_l_m[k] = sigma(rng);
-    }
+    const float d0 = dist(rng), s0 = sigma(rng), d1 = dist(rng), s1 = sigma(rng);
+    const MetricFrame m = Pixels({d0, d1}, {s0, s1});
     const double s = m.delta_l_m[0], sn = m.delta_l_m[1];
     const double step =
         std::abs(static_cast<double>(m.radial_distance_m[1]) - m.radial_distance_m[0]);
@@ -285,22 +292,26 @@ TEST(Uncertainty, ThresholdsWithinAnUlpOfTheStepFollowTheDefinition) {
       const float expected = static_cast<float>(std::sqrt(s * s + e * e));
       UncertaintyOptions o;
       o.min_jump_sigma = jump_sigma;
-      // A threshold between u without and with the edge term, so that the flag is the edge test.
+      // A threshold between u without and with the edge term, so that the flag follows the edge
+      // test (unless both u round to the threshold's float: counted below).
       o.max_uncertainty_m = std::sqrt(s * s + 0.125 * step * step);
+      const bool low = DefinitionLow(m, 0, 0, o);
+      flag_is_edge += low == edge;
       for (const bool portable : {false, true}) {
         const internal::PortableFormsForTesting forms(portable);
         const float got = ComputeUncertainty(m, o)[0];
         ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0)
             << "case " << i << (portable ? " portable" : " AVX-512 if available") << ": step "
             << step << ", min_jump_sigma " << jump_sigma;
-        ASSERT_EQ(UncertaintyFilter(m, o)[0].Has(Flag::kLowConfidence), edge)
+        ASSERT_EQ(UncertaintyFilter(m, o)[0].Has(Flag::kLowConfidence), low)
             << "case " << i << (portable ? " portable" : " AVX-512 if available") << ": step "
             << step << ", min_jump_sigma " << jump_sigma;
       }
     }
   }
-  EXPECT_GT(squares_disagree, 10);  // the band and the exact redo matter here
-  EXPECT_GT(edges, cases / 4);      // both outcomes occur
+  EXPECT_GT(squares_disagree, 10);            // the band and the exact redo matter here
+  EXPECT_GT(flag_is_edge, 99 * cases / 100);  // the flags test the edge decisions
+  EXPECT_GT(edges, cases / 4);                // both outcomes occur
   EXPECT_LT(edges, 3 * cases / 4);
 }
 
@@ -314,15 +325,8 @@ TEST(Uncertainty, FlagsAtThresholdsWithinAnUlpOfUFollowTheDefinition) {
   std::uniform_real_distribution<float> dist(1.0f, 2.0f), sigma(0.01f, 0.05f);
   int float_disagrees = 0, lows = 0, cases = 0;
   for (int i = 0; i < 3000; ++i) {
-    MetricFrame m;
-    m.radial_distance_m = Image<float>(2, 1);
-    m.delta_l_m = Image<float>(2, 1);
-    m.flags = Image<PixelFlags>(2, 1);
-    m.amplitude = Image<float>(2, 1, 1000.0f);
-    m.radial_distance_m[0] = dist(rng);
-    m.radial_distance_m[1] = m.radial_distance_m[0] + 1.0f + dist(rng);
-    m.delta_l_m[0] = sigma(rng);
-    m.delta_l_m[1] = sigma(rng);
+    const float d0 = dist(rng), d1 = d0 + 1.0f + dist(rng), s0 = sigma(rng), s1 = sigma(rng);
+    const MetricFrame m = Pixels({d0, d1}, {s0, s1});
     UncertaintyOptions o;
     const float u = DefinitionU(m, 0, 0, o);
     const float step = m.radial_distance_m[1] - m.radial_distance_m[0];
@@ -357,7 +361,7 @@ TEST(Uncertainty, ExtremeValuesAndOptionsFollowTheDefinition) {
   std::mt19937 rng(11);
   std::uniform_int_distribution<int> pick(0, static_cast<int>(std::size(magnitudes)) - 1);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  std::vector<UncertaintyOptions> options(9);
+  std::vector<UncertaintyOptions> options(11);
   options[1].min_jump_sigma = 1e-3;
   options[2].min_jump_sigma = 5e-4;
   options[3].max_uncertainty_m = 1e-10;
@@ -366,14 +370,12 @@ TEST(Uncertainty, ExtremeValuesAndOptionsFollowTheDefinition) {
   options[6].edge_fraction = 0.0;
   options[7].edge_fraction = 1.0;
   options[8].unknown_neighbour_flags = static_cast<std::uint16_t>(Flag::kSaturated);
+  options[9].max_uncertainty_m = 9e-11;  // below the float form's limits: the exact form
+  options[10].edge_fraction = 5e-7;
   int lows = 0, judged = 0;
   for (int trial = 0; trial < 20; ++trial) {
     const int w = 37, h = 9;
-    MetricFrame m;
-    m.radial_distance_m = Image<float>(w, h);
-    m.amplitude = Image<float>(w, h, 1000.0f);
-    m.flags = Image<PixelFlags>(w, h);
-    m.delta_l_m = Image<float>(w, h);
+    MetricFrame m = Blank(w, h);
     for (std::size_t i = 0; i < m.flags.size(); ++i) {
       // Most pixels ordinary (a surface at 1-2 m with ΔL of 1-5 cm), the rest extreme.
       const bool ordinary = u(rng) < 0.5f;
