@@ -27,6 +27,8 @@ class NormalTable {
     }
   }
   [[nodiscard]] float at(int i) const { return values_[i]; }
+  /// The kCells + 1 grid values (for the AVX-512 form of NoisyTaps, src/sim/noise.cc).
+  [[nodiscard]] const float* data() const { return values_.data(); }
 
  private:
   static double InverseCdf(double p) {
@@ -54,6 +56,14 @@ inline constexpr double kPoissonGaussMean = 30.0;
 class Rng {
  public:
   explicit Rng(std::uint64_t seed) { Seed(seed); }
+  /// The generator continuing from a state taken with state() (the AVX-512 form of NoisyTaps
+  /// runs eight streams in vector lanes and hands a lane to this class for its rare draws).
+  static Rng FromState(const std::array<std::uint64_t, 4>& state) {
+    Rng r(0);
+    r.s_ = state;
+    return r;
+  }
+  [[nodiscard]] const std::array<std::uint64_t, 4>& state() const { return s_; }
   void Seed(std::uint64_t seed) {
     for (auto& w : s_) w = SplitMix64(seed);
   }
@@ -74,18 +84,20 @@ class Rng {
   float Normal() {
     const std::uint64_t r = Next();
     const int cell = static_cast<int>(r >> 52);  // 12 bits
-    if (cell == 0 || cell == NormalTable::kCells - 1) {
-      // Marsaglia's exact tail sampler beyond the last table cell.
-      const double a = table_.at(NormalTable::kCells - 1);
-      double x = 0, y = 0;
-      do {
-        x = -std::log(1.0 - Uniform()) / a;
-        y = -std::log(1.0 - Uniform());
-      } while (2 * y <= x * x);
-      return static_cast<float>(cell == 0 ? -(a + x) : a + x);
-    }
+    if (cell == 0 || cell == NormalTable::kCells - 1) return Tail(cell);
     const float frac = static_cast<float>((r >> 20) & 0xFFFFFFFFull) * 0x1.0p-32f;
     return table_.at(cell) + frac * (table_.at(cell + 1) - table_.at(cell));
+  }
+  /// The normal of a draw that fell in an outermost table cell (0 or kCells - 1): Marsaglia's
+  /// exact tail sampler beyond the last table cell, from this stream's next uniforms.
+  float Tail(int cell) {
+    const double a = table_.at(NormalTable::kCells - 1);
+    double x = 0, y = 0;
+    do {
+      x = -std::log(1.0 - Uniform()) / a;
+      y = -std::log(1.0 - Uniform());
+    } while (2 * y <= x * x);
+    return static_cast<float>(cell == 0 ? -(a + x) : a + x);
   }
   /// Poisson with mean `mean` >= 0: exact (Knuth) below 30, Gaussian N(mean, mean) above.
   double Poisson(double mean) {

@@ -93,18 +93,21 @@ TOFCAM_SIM_LOOP void PixelMeans(const SensorConstants& k, int n, const float* __
 // The tap means (tap k from rendering k when there are four) and the mean amplitude and offset
 // over the renderings.
 void TapMeans(int n, int slots, SensorRow& sr) {
+  const std::size_t at = sr.RowOffset();
+  double* mu[4] = {sr.mu[0].data() + at, sr.mu[1].data() + at, sr.mu[2].data() + at,
+                   sr.mu[3].data() + at};
   if (slots == 1) {
-    TapMeans1(n, sr.a[0].data(), sr.b[0].data(), sr.cos_p[0].data(), sr.sin_p[0].data(),
-              sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(), sr.mu[3].data());
+    TapMeans1(n, sr.a[0].data(), sr.b[0].data(), sr.cos_p[0].data(), sr.sin_p[0].data(), mu[0],
+              mu[1], mu[2], mu[3]);
     std::copy_n(sr.a[0].begin(), n, sr.a_mean.begin());
     std::copy_n(sr.b[0].begin(), n, sr.b_mean.begin());
     return;
   }
   for (int c = 0; c < n; ++c) {
-    sr.mu[0][c] = sr.b[0][c] + sr.a[0][c] * sr.cos_p[0][c];
-    sr.mu[1][c] = sr.b[1][c] + sr.a[1][c] * sr.sin_p[1][c];
-    sr.mu[2][c] = sr.b[2][c] - sr.a[2][c] * sr.cos_p[2][c];
-    sr.mu[3][c] = sr.b[3][c] - sr.a[3][c] * sr.sin_p[3][c];
+    mu[0][c] = sr.b[0][c] + sr.a[0][c] * sr.cos_p[0][c];
+    mu[1][c] = sr.b[1][c] + sr.a[1][c] * sr.sin_p[1][c];
+    mu[2][c] = sr.b[2][c] - sr.a[2][c] * sr.cos_p[2][c];
+    mu[3][c] = sr.b[3][c] - sr.a[3][c] * sr.sin_p[3][c];
     // Summed in slot order, as a running mean of a / 4 (exact scaling by a power of two).
     sr.a_mean[c] = sr.a[0][c] * 0.25 + sr.a[1][c] * 0.25 + sr.a[2][c] * 0.25 + sr.a[3][c] * 0.25;
     sr.b_mean[c] = sr.b[0][c] * 0.25 + sr.b[1][c] * 0.25 + sr.b[2][c] * 0.25 + sr.b[3][c] * 0.25;

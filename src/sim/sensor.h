@@ -4,6 +4,7 @@
 // saturation with overflow and blooming, and demodulation with quantisation to registers.
 
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -21,18 +22,34 @@ struct SensorConstants {
   double m_to_rad = 0;                                  ///< 2 pi / L, rad/m
 };
 
-/// Per thread: one row of the sensor stage.
+/// Per thread: one row of the sensor stage, and the tap means and shot-noise sigmas of up to
+/// kNoiseBlockRows rows waiting for their noise (NoisyTapsRows, src/sim/noise.h, draws eight
+/// rows' streams at once on AVX-512 CPUs).
 struct SensorRow {
+  static constexpr int kNoiseBlockRows = 8;
   std::vector<double> a[4], b[4], cos_p[4], sin_p[4];  ///< per rendering (tap time)
   std::vector<double> shift;                           ///< phase shift (rad) of rendering 0..3
-  std::vector<double> mu[4], a_mean, b_mean;
-  std::vector<float> sd[4];           ///< sqrt(mu_k): sigma of the Gaussian shot noise
+  std::vector<double> a_mean, b_mean;
+  /// Tap means mu_k and sqrt(mu_k), the sigma of the Gaussian shot noise: the waiting rows one
+  /// after the other, the current row (number block_rows) at RowOffset().
+  std::vector<double> mu[4];
+  std::vector<float> sd[4];
   std::vector<float> sigma, noise;    ///< truth sigma (m) and its denominator B + read variance
   std::vector<std::uint16_t> causes;  ///< truth cause bits
+  std::uint64_t block_seed[kNoiseBlockRows] = {};  ///< random stream of each waiting row
+  int block_row[kNoiseBlockRows] = {};             ///< frame row of each waiting row
+  int block_rows = 0;                              ///< rows waiting
+  int width = 0;
+  [[nodiscard]] std::size_t RowOffset() const {
+    return static_cast<std::size_t>(block_rows) * static_cast<std::size_t>(width);
+  }
   void Resize(int n) {
+    width = n;
+    block_rows = 0;
     for (int k = 0; k < 4; ++k) {
-      for (auto* v : {&a[k], &b[k], &cos_p[k], &sin_p[k], &mu[k]}) v->resize(n);
-      sd[k].resize(n);
+      for (auto* v : {&a[k], &b[k], &cos_p[k], &sin_p[k]}) v->resize(n);
+      mu[k].resize(static_cast<std::size_t>(kNoiseBlockRows) * n);
+      sd[k].resize(static_cast<std::size_t>(kNoiseBlockRows) * n);
     }
     for (auto* v : {&shift, &a_mean, &b_mean}) v->resize(n);
     sigma.resize(n);

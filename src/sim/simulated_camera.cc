@@ -563,21 +563,34 @@ std::optional<Frame> SimulatedCamera::Grab() {
                    sr.cos_p[slot].data(), sr.sin_p[slot].data(), sr.shift.data());
       }
       TapMeans(w, slots, sr);
-      NoiseScales(w, read_var, sigma_scale, sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(),
-                  sr.mu[3].data(), sr.a_mean.data(), sr.b_mean.data(), sr.sd[0].data(),
-                  sr.sd[1].data(), sr.sd[2].data(), sr.sd[3].data(), sr.sigma.data(),
-                  sr.noise.data());
+      const std::size_t at = sr.RowOffset();
+      NoiseScales(w, read_var, sigma_scale, sr.mu[0].data() + at, sr.mu[1].data() + at,
+                  sr.mu[2].data() + at, sr.mu[3].data() + at, sr.a_mean.data(), sr.b_mean.data(),
+                  sr.sd[0].data() + at, sr.sd[1].data() + at, sr.sd[2].data() + at,
+                  sr.sd[3].data() + at, sr.sigma.data(), sr.noise.data());
       // Shot and read noise, one random stream per row. Draws in the order of Rng::Poisson then
       // the read noise, per tap: drawing shot plus read noise as one N(mu, mu + s^2) would be the
       // same distribution with half the draws, but a different realisation, and statistics
-      // evaluated on single frames (experiments fig. 6-7) depend on the realisation.
-      const double* const mu[4] = {sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(),
-                                   sr.mu[3].data()};
-      const float* const sd[4] = {sr.sd[0].data(), sr.sd[1].data(), sr.sd[2].data(),
-                                  sr.sd[3].data()};
-      float* const tap_row[4] = {&im.taps[0][row], &im.taps[1][row], &im.taps[2][row],
-                                 &im.taps[3][row]};
-      NoisyTaps(w, RowSeed(frame_seed, r), opt.shot_noise, read_sigma, mu, sd, tap_row);
+      // evaluated on single frames (experiments fig. 6-7) depend on the realisation. The rows
+      // wait in blocks of eight (the AVX-512 form draws eight streams at once); nothing below
+      // reads the taps.
+      sr.block_seed[sr.block_rows] = RowSeed(frame_seed, r);
+      sr.block_row[sr.block_rows] = r;
+      ++sr.block_rows;
+      if (sr.block_rows == SensorRow::kNoiseBlockRows || r + 1 == r1) {
+        const double* const mu[4] = {sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(),
+                                     sr.mu[3].data()};
+        const float* const sd[4] = {sr.sd[0].data(), sr.sd[1].data(), sr.sd[2].data(),
+                                    sr.sd[3].data()};
+        float* tap_rows[SensorRow::kNoiseBlockRows][4];
+        for (int j = 0; j < sr.block_rows; ++j) {
+          const std::size_t row_at = static_cast<std::size_t>(sr.block_row[j]) * w;
+          for (int k = 0; k < 4; ++k) tap_rows[j][k] = &im.taps[k][row_at];
+        }
+        NoisyTapsRows(sr.block_rows, w, static_cast<std::size_t>(w), sr.block_seed, opt.shot_noise,
+                      read_sigma, mu, sd, tap_rows);
+        sr.block_rows = 0;
+      }
       // Ground truth.
       const Render& rd = im.renders[0];
       if (cos_bias >= 0) {

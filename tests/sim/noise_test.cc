@@ -4,9 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "rng.h"
 #include "tofcam/sim/camera_model.h"
 
@@ -89,6 +93,89 @@ TEST(NoiseTest, TheStreamDependsOnlyOnTheSeed) {
   EXPECT_NE(m1, m3);
   EXPECT_NE(RowSeed(5, 0), RowSeed(5, 1));
   EXPECT_EQ(RowSeed(5, 0), 5u);
+}
+
+// NoisyTapsRows against NoisyTaps row by row, bit for bit: the AVX-512 form (eight streams in
+// vector lanes, on AVX-512 CPUs) and the portable rows. Means of every regime: Gaussian (the
+// vector path), below kPoissonGaussMean, zero, negative and NaN (the lanes' exact Poisson path),
+// huge; widths around the eight-column blocks; 1 to 8 rows; shot and read noise each on and off.
+// 640 columns of eight rows draw about 41,000 normals, so the outermost table cells (one draw in
+// 2048, Rng::Tail) occur about 20 times.
+TEST(NoiseTest, EightRowsAtOnceDrawWhatEachRowDrawsAlone) {
+  const double special[] = {0.0, -5.0, 3.0, 29.9, 30.0, std::nan(""), 1e12};
+  int compared = 0;
+  for (const int width : {1, 7, 8, 9, 17, 640}) {
+    for (const int rows : {1, 5, 8}) {
+      for (const bool shot : {true, false}) {
+        for (const double read_sigma : {0.0, 30.0}) {
+          SCOPED_TRACE(testing::Message()
+                       << width << " x " << rows << " shot " << shot << " read " << read_sigma);
+          const std::size_t n = static_cast<std::size_t>(rows) * width;
+          std::vector<double> mu[4];
+          std::vector<float> sd[4];
+          for (int k = 0; k < 4; ++k) {
+            mu[k].resize(n);
+            sd[k].resize(n);
+            for (std::size_t i = 0; i < n; ++i) {
+              // Mostly lit pixels; every 97th pixel (and tap) something special.
+              const std::size_t h = i * 31 + static_cast<std::size_t>(k) * 7;
+              mu[k][i] =
+                  h % 97 == 0 ? special[(h / 97) % 7] : 100.0 + static_cast<double>(h % 5000);
+              sd[k][i] = static_cast<float>(std::sqrt(std::max(mu[k][i], 0.0)));
+            }
+          }
+          std::vector<std::uint64_t> seeds(static_cast<std::size_t>(rows));
+          for (int j = 0; j < rows; ++j) seeds[j] = RowSeed(99, j);
+          const double* const mu_p[4] = {mu[0].data(), mu[1].data(), mu[2].data(), mu[3].data()};
+          const float* const sd_p[4] = {sd[0].data(), sd[1].data(), sd[2].data(), sd[3].data()};
+          // Expected: each row alone.
+          std::vector<float> want[4], got[4], portable[4];
+          for (int k = 0; k < 4; ++k) {
+            want[k].assign(n, -1.f);
+            got[k].assign(n, -2.f);
+            portable[k].assign(n, -3.f);
+          }
+          float* want_rows[8][4];
+          float* got_rows[8][4];
+          float* portable_rows[8][4];
+          for (int j = 0; j < rows; ++j) {
+            const std::size_t at = static_cast<std::size_t>(j) * width;
+            for (int k = 0; k < 4; ++k) {
+              want_rows[j][k] = want[k].data() + at;
+              got_rows[j][k] = got[k].data() + at;
+              portable_rows[j][k] = portable[k].data() + at;
+            }
+            const double* const mu_j[4] = {mu_p[0] + at, mu_p[1] + at, mu_p[2] + at, mu_p[3] + at};
+            const float* const sd_j[4] = {sd_p[0] + at, sd_p[1] + at, sd_p[2] + at, sd_p[3] + at};
+            NoisyTaps(width, seeds[j], shot, read_sigma, mu_j, sd_j, want_rows[j]);
+          }
+          NoisyTapsRows(rows, width, static_cast<std::size_t>(width), seeds.data(), shot,
+                        read_sigma, mu_p, sd_p, got_rows);
+          {
+            const tofcam::internal::PortableFormsForTesting forms(true);
+            NoisyTapsRows(rows, width, static_cast<std::size_t>(width), seeds.data(), shot,
+                          read_sigma, mu_p, sd_p, portable_rows);
+          }
+          for (int k = 0; k < 4; ++k) {
+            for (std::size_t i = 0; i < n; ++i) {
+              // Bit patterns, so that NaN taps (from NaN means) compare too.
+              ASSERT_EQ(std::bit_cast<std::uint32_t>(got[k][i]),
+                        std::bit_cast<std::uint32_t>(want[k][i]))
+                  << "tap " << k << " pixel " << i << ": " << got[k][i] << " vs " << want[k][i];
+              ASSERT_EQ(std::bit_cast<std::uint32_t>(portable[k][i]),
+                        std::bit_cast<std::uint32_t>(want[k][i]))
+                  << "tap " << k << " pixel " << i;
+              ++compared;
+            }
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(compared, 100000);
+  if (!tofcam::internal::CpuHasAvx512()) {
+    GTEST_SKIP() << "no AVX-512 on this CPU: only the portable rows were compared";
+  }
 }
 
 TEST(NoiseTest, FixedPatternIsABowlReachingItsDepthAtTheCorners) {
