@@ -21,6 +21,13 @@ void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
                  const std::vector<float>& k);
 /// The same with GaussianKernel(sigma).
 void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h, double sigma);
+/// BlurInPlace of a non-negative image that is zero outside rows [r0, r1) and columns [c0, c1)
+/// (a box inside the image), with a non-negative kernel: only that box grown by the kernel's
+/// radius is computed (the rest of img stays zero; tmp outside it is neither read nor written).
+/// Every output sums the same products in the same order as BlurInPlace, less products with a
+/// zero pixel, which add +0 to a sum >= +0: the same values bit for bit.
+void BlurBoxInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
+                    const std::vector<float>& k, int r0, int r1, int c0, int c1);
 
 /// Scattering: reduction factor, reduced size, lobe kernels and bilinear upsampling taps.
 struct ScatterPlan {

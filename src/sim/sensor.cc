@@ -14,6 +14,20 @@ namespace tofcam::sim::internal {
 
 namespace {
 
+// Pixels with a tap above the full well (vectorised: a count rather than an early exit).
+TOFCAM_SIM_LOOP std::size_t CountOverFullWell(std::size_t n, float full_well,
+                                              const float* __restrict t0,
+                                              const float* __restrict t1,
+                                              const float* __restrict t2,
+                                              const float* __restrict t3) {
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    count += static_cast<std::size_t>((t0[i] > full_well) | (t1[i] > full_well) |
+                                      (t2[i] > full_well) | (t3[i] > full_well));
+  }
+  return count;
+}
+
 // One pixel of PixelMeans; `exact` uses libm for the phase shift (for shifts beyond the range of
 // the polynomial).
 inline void PixelMean(const SensorConstants& k, float re, float im, float dc, float sre, float sim,
@@ -169,25 +183,45 @@ bool Saturate(std::vector<float> (&taps)[4], std::vector<float>& bloom_mean,
   const float fw = static_cast<float>(full_well);
   const float keep_share = static_cast<float>(overflow);
   const float out_share = static_cast<float>(bloom);
-  bool any = false;
   bloom_mean.assign(np, 0.f);
-  for (std::size_t i = 0; i < np; ++i) {
-    float n[4];
-    for (int k = 0; k < 4; ++k) n[k] = taps[k][i];
-    const float out = OverflowPixel(n, fw, keep_share);
-    for (int k = 0; k < 4; ++k) taps[k][i] = n[k];
-    const float spill = out_share * out;
-    if (spill > 0) {
-      bloom_mean[i] = spill / 4;  // per tap of the receiving pixel
-      any = true;
+  // Most pixels hold no tap above the full well, and OverflowPixel leaves those as they are:
+  // blocks without one are skipped after a vectorised count. The box of the spilling pixels
+  // bounds the blur and the blooming noise below (zero elsewhere).
+  int r0 = height, r1 = 0, c0 = width, c1 = 0;
+  constexpr std::size_t kBlock = 64;
+  for (std::size_t b = 0; b < np; b += kBlock) {
+    const std::size_t end = std::min(np, b + kBlock);
+    if (CountOverFullWell(end - b, fw, &taps[0][b], &taps[1][b], &taps[2][b], &taps[3][b]) == 0) {
+      continue;
+    }
+    for (std::size_t i = b; i < end; ++i) {
+      float n[4];
+      for (int k = 0; k < 4; ++k) n[k] = taps[k][i];
+      const float out = OverflowPixel(n, fw, keep_share);
+      for (int k = 0; k < 4; ++k) taps[k][i] = n[k];
+      const float spill = out_share * out;
+      if (spill > 0) {
+        bloom_mean[i] = spill / 4;  // per tap of the receiving pixel
+        const int r = static_cast<int>(i / static_cast<std::size_t>(width));
+        const int c = static_cast<int>(i % static_cast<std::size_t>(width));
+        r0 = std::min(r0, r);
+        r1 = std::max(r1, r + 1);
+        c0 = std::min(c0, c);
+        c1 = std::max(c1, c + 1);
+      }
     }
   }
-  if (!any) return false;
-  BlurInPlace(bloom_mean, tmp, width, height, blooming_sigma_px);
-  for (int r = 0; r < height; ++r) {
+  if (r1 <= r0) return false;  // nothing spilled
+  const std::vector<float> kernel = GaussianKernel(blooming_sigma_px);
+  BlurBoxInPlace(bloom_mean, tmp, width, height, kernel, r0, r1, c0, c1);
+  // Rows and columns beyond the blurred box have no bloom (their streams are not drawn from, as
+  // before: a pixel without bloom draws nothing).
+  const int radius = static_cast<int>(kernel.size() / 2);
+  const int c_end = std::min(width, c1 + radius);
+  for (int r = std::max(0, r0 - radius); r < std::min(height, r1 + radius); ++r) {
     Rng rng(frame_seed ^ 0xB10060000000000Dull ^
             (static_cast<std::uint64_t>(r) * 0xA24BAED4963EE407ull));
-    for (int c = 0; c < width; ++c) {
+    for (int c = std::max(0, c0 - radius); c < c_end; ++c) {
       const std::size_t i = static_cast<std::size_t>(r) * width + c;
       const float mean = bloom_mean[i];
       if (!(mean > 0)) continue;

@@ -4,7 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <numeric>
 
 #include "tofcam/sim/camera_model.h"
@@ -45,6 +48,40 @@ TEST(OpticsTest, BlurLosesTheLightThatLeavesTheSensor) {
   BlurInPlace(img, tmp, w, h, k);
   const double total = std::accumulate(img.begin(), img.end(), 0.0);
   EXPECT_NEAR(total, k[3] + k[4] + k[5] + k[6], 1e-6);
+}
+
+TEST(OpticsTest, BoxBlurIsTheWholeImageBlurBitForBit) {
+  // Non-negative images that are zero outside a box: boxes in the middle, touching every edge,
+  // narrower than the kernel, one pixel, and the whole image; kernels of radius 1 to 7 (sigma up
+  // to 2.3 px, wider than some images). Stale scratch must not leak in: tmp starts as garbage.
+  const int w = 23, h = 19;
+  const int boxes[][4] = {{5, 9, 6, 12},  {0, 4, 0, 3},    {15, 19, 20, 23}, {0, 19, 0, 23},
+                          {8, 9, 11, 12}, {0, 19, 10, 11}, {3, 4, 0, 23},    {17, 19, 0, 2}};
+  int compared = 0;
+  for (const double sigma : {0.3, 1.0, 2.3}) {
+    const std::vector<float> k = GaussianKernel(sigma);
+    for (const auto& b : boxes) {
+      std::vector<float> img(static_cast<std::size_t>(w) * h, 0.f);
+      for (int r = b[0]; r < b[1]; ++r) {
+        for (int c = b[2]; c < b[3]; ++c) {
+          // Some zeros inside the box too, and values over several decades.
+          const int v = (r * 31 + c * 17) % 7;
+          img[static_cast<std::size_t>(r) * w + c] = v == 0 ? 0.f : std::ldexp(1.3f * v, v * 3);
+        }
+      }
+      std::vector<float> whole = img, box = img, tmp_whole;
+      std::vector<float> tmp_box(img.size(), std::numeric_limits<float>::quiet_NaN());
+      BlurInPlace(whole, tmp_whole, w, h, k);
+      BlurBoxInPlace(box, tmp_box, w, h, k, b[0], b[1], b[2], b[3]);
+      for (std::size_t i = 0; i < img.size(); ++i) {
+        ASSERT_EQ(std::bit_cast<std::uint32_t>(box[i]), std::bit_cast<std::uint32_t>(whole[i]))
+            << "sigma " << sigma << " box " << b[0] << " " << b[1] << " " << b[2] << " " << b[3]
+            << " pixel " << i;
+        compared += whole[i] > 0;
+      }
+    }
+  }
+  EXPECT_GT(compared, 3000);  // not a comparison of empty images
 }
 
 TEST(OpticsTest, ScatterPlanReducesWideLobes) {
