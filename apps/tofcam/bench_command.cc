@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -129,6 +130,35 @@ Input MakeInput(int width, int height, int frames, double delta_l_scale,
 }
 
 // Per-thread state: own copies of the inputs and own output buffers.
+// The memcpy floor's source and destination: page-aligned, touched once, reused. Allocated
+// apart from the heap's placement, so the floor does not depend on where the allocator puts two
+// large blocks (the CLI keeps freed memory in the heap, main.cc; with the default policy they
+// are fresh mappings).
+class CopyBuffers {
+ public:
+  void Ensure(std::size_t bytes) {
+    if (bytes <= size_) return;
+    constexpr std::size_t kPage = 4096;
+    const std::size_t rounded = (bytes + kPage - 1) / kPage * kPage;
+    src_.reset(static_cast<char*>(std::aligned_alloc(kPage, rounded)));
+    dst_.reset(static_cast<char*>(std::aligned_alloc(kPage, rounded)));
+    if (!src_ || !dst_) throw Error(ErrorCode::kInternal, "bench: cannot allocate copy buffers");
+    std::memset(src_.get(), 1, rounded);  // touched now: no page faults in the floor
+    std::memset(dst_.get(), 0, rounded);
+    size_ = rounded;
+  }
+  [[nodiscard]] char* src() const { return src_.get(); }
+  [[nodiscard]] char* dst() const { return dst_.get(); }
+  [[nodiscard]] std::size_t size() const { return size_; }
+
+ private:
+  struct Free {
+    void operator()(char* p) const { std::free(p); }
+  };
+  std::unique_ptr<char, Free> src_, dst_;
+  std::size_t size_ = 0;
+};
+
 struct Workspace {
   const Input* input = nullptr;
   std::vector<Frame> frames;
@@ -156,8 +186,7 @@ struct Workspace {
   std::optional<Pipeline> pipeline_default;
   std::optional<Pipeline> pipeline_all_filters;
   PipelineResult result;
-  std::vector<char> copy_src;
-  std::vector<char> copy_dst;
+  CopyBuffers copy;
   std::size_t copy_bytes = 0;
   std::uint64_t sink = 0;
 };
@@ -225,9 +254,7 @@ void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
   ws.pipeline_default.emplace(po, in.info);
   po.filters = AllFilters();
   ws.pipeline_all_filters.emplace(po, in.info);
-  // Touch the copy buffers now so page faults are not part of the floor.
-  ws.copy_src.assign(max_copy_bytes, 1);
-  ws.copy_dst.assign(max_copy_bytes, 0);
+  ws.copy.Ensure(max_copy_bytes);
 }
 
 // One stage: `run(ws, i)` processes frame i (mod the frame count) of the workspace.
@@ -531,8 +558,8 @@ Paired TimeAgainstFloor(std::vector<Workspace>& ws, int threads,
                         const std::function<void(Workspace&, std::size_t)>& fn,
                         std::size_t floor_bytes, double min_time_s) {
   const std::function<void(Workspace&, std::size_t)> copy = [](Workspace& w, std::size_t) {
-    std::memcpy(w.copy_dst.data(), w.copy_src.data(), w.copy_bytes);
-    Sink(w, w.copy_dst.data());
+    std::memcpy(w.copy.dst(), w.copy.src(), w.copy_bytes);
+    Sink(w, w.copy.dst());
   };
   for (auto& w : ws) w.copy_bytes = floor_bytes;
   const std::size_t reps = CalibrateReps(ws, threads, fn, min_time_s);
@@ -563,8 +590,8 @@ double MemcpyNs(std::vector<Workspace>& ws, int threads, std::size_t bytes, doub
   return TimePerCall(
       ws, threads,
       [](Workspace& w, std::size_t) {
-        std::memcpy(w.copy_dst.data(), w.copy_src.data(), w.copy_bytes);
-        Sink(w, w.copy_dst.data());
+        std::memcpy(w.copy.dst(), w.copy.src(), w.copy_bytes);
+        Sink(w, w.copy.dst());
       },
       min_time_s);
 }
@@ -798,10 +825,7 @@ void RunBench(const BenchOptions& o) {
   if (!o.peers_only) {
     constexpr std::size_t kBytes = std::size_t{256} << 20;
     std::vector<Workspace> ws(2);
-    for (auto& w : ws) {
-      w.copy_src.assign(kBytes, 1);
-      w.copy_dst.assign(kBytes, 0);
-    }
+    for (auto& w : ws) w.copy.Ensure(kBytes);
     for (int t : thread_counts) {
       const double ns = MemcpyNs(ws, t, kBytes, std::max(o.min_time_s, 0.5));
       report["memory_bandwidth_gb_s"][std::to_string(t) + "_threads"] = 2.0 * kBytes / ns * t;
@@ -847,12 +871,7 @@ void RunBench(const BenchOptions& o) {
         // A memcpy of N bytes reads N and writes N: N = traffic / 2 gives the same traffic.
         const auto bytes =
             static_cast<std::size_t>(r.bytes_per_pixel / 2 * static_cast<double>(in.pixels()));
-        for (Workspace& w : ws) {
-          if (w.copy_src.size() < bytes) {
-            w.copy_src.assign(bytes, 1);
-            w.copy_dst.assign(bytes, 0);
-          }
-        }
+        for (Workspace& w : ws) w.copy.Ensure(bytes);
         const Paired p = TimeAgainstFloor(ws, t, s.run, bytes, o.min_time_s);
         r.ns_per_frame = p.stage_ns / s.frames_per_call;
         r.ns_min = p.stage_min / s.frames_per_call;

@@ -3,6 +3,10 @@
 #include <cstdio>
 #include <exception>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 #include "commands.h"
 #include "tofcam/core/error.h"
 #include "tofcam/version.h"
@@ -23,7 +27,22 @@ bool RegisterCommand(const std::string& name, CommandSetup setup) {
 
 namespace {
 
+// Keep freed memory in the process. Frames and stage outputs of a few MB are allocated and freed
+// at camera rate; by default glibc serves blocks above 128 KB with mmap, or (after its dynamic
+// threshold rises) returns the freed top of the heap, so every frame's images are page-faulted
+// in and zero-filled by the kernel again: `tofcam run` on the simulated 640x480 camera took
+// 2.1 times as long (docs/benchmarks.md). Thresholds: below 32 MiB from the heap (glibc's
+// largest mmap threshold), at most 512 MiB of free heap kept. Library users get the same with
+// GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432 (docs/benchmarks.md).
+void KeepFreedMemory() {
+#if defined(__GLIBC__)
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  mallopt(M_TRIM_THRESHOLD, 512 << 20);
+#endif
+}
+
 int Run(int argc, char** argv) {
+  KeepFreedMemory();
   CLI::App app{"tofcam: time-of-flight cameras for mobile robots"};
   try {
     app.set_version_flag("--version", tofcam::kVersionString);

@@ -1,8 +1,8 @@
 #include "geometry.h"
 
 #include <algorithm>
-#include <type_traits>
 #include <string>
+#include <type_traits>
 
 #include "tofcam/core/error.h"
 
