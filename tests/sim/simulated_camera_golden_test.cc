@@ -11,9 +11,10 @@
 // told apart by the native packet width: 16 (AVX-512, the machine's own choice), 8 and 4
 // (recorded on the same machine with 29661d2's rtcNewDevice config forced to "isa=avx2" and
 // "isa=sse4.2"). Another packet width skips the test with a message. They assume the project's
-// compiler flags (no -ffast-math, no FMA contraction); the row loops' AVX2 and baseline clones do
-// the same IEEE operations. A deliberate change of the simulator's physics or random stream
-// changes them: then re-record them the same way and say why in the commit.
+// compiler flags (no -ffast-math, no FMA contraction); the row loops' x86-64-v4, AVX2 and baseline
+// clones and the AVX-512 form of the tap noise do the same IEEE operations. A deliberate change of
+// the simulator's physics or random stream changes them: then re-record them the same way and say
+// why in the commit.
 #include <gtest/gtest.h>
 
 #include <cstdint>
