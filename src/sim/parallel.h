@@ -34,9 +34,10 @@ class RowPool {
   }
 
   // Runs body(row_begin, row_end, thread_index) over [0, rows); in parallel only when there are
-  // at least min_rows_per_thread rows per thread.
+  // at least min_rows_per_thread rows per thread. Chunks start at multiples of `granularity`
+  // rows (the sensor loop draws the noise of eight rows at once).
   template <typename F>
-  void Run(int rows, const F& body, int min_rows_per_thread = 2) {
+  void Run(int rows, const F& body, int min_rows_per_thread = 2, int granularity = 1) {
     const int threads = static_cast<int>(workers_.size()) + 1;
     if (threads == 1 || rows < min_rows_per_thread * threads) {
       body(0, rows, 0);
@@ -47,7 +48,8 @@ class RowPool {
       body_ = &body;
       call_ = [](const void* b, int r0, int r1, int t) { (*static_cast<const F*>(b))(r0, r1, t); };
       rows_ = rows;
-      chunk_ = std::max(1, rows / (8 * threads));
+      const int chunk = std::max(1, rows / (8 * threads));
+      chunk_ = (chunk + granularity - 1) / granularity * granularity;
       next_.store(0, std::memory_order_relaxed);
       open_ = true;
       ++generation_;

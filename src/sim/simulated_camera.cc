@@ -526,8 +526,9 @@ std::optional<Frame> SimulatedCamera::Grab() {
   const std::uint64_t frame_seed = FrameSeed(opt.seed, sequence_);
 
   // Row loops run on the camera's persistent workers (the demodulation loop below too).
-  const auto ParallelRows = [&im](int rows, int /*threads*/, const auto& body) {
-    im.pool->Run(rows, body);
+  const auto ParallelRows = [&im](int rows, int /*threads*/, const auto& body,
+                                  int granularity = 1) {
+    im.pool->Run(rows, body, 2, granularity);
   };
   // Taps: noiseless means, then shot and read noise per tap.
   const double cos_bias = std::cos(std::min(bias_rad, kPi));
@@ -549,97 +550,103 @@ std::optional<Frame> SimulatedCamera::Grab() {
   sk.m_to_rad = two_pi / range;
   const double read_var = read_sigma * read_sigma;
   const double sigma_scale = range / (2 * std::sqrt(2.0) * kPi);
-  ParallelRows(h, opt.threads, [&](int r0, int r1, int thread) {
-    SensorRow& sr = im.scratch[thread].sensor;
-    sr.Resize(w);
-    for (int r = r0; r < r1; ++r) {
-      const std::size_t row = static_cast<std::size_t>(r) * w;
-      const float* fpn = &im.fpn_m[row];  // zeros when the fixed pattern is off
-      // Noiseless means of the four taps (each from its own rendering when the scene moves).
-      for (int slot = 0; slot < slots; ++slot) {
-        const Render& rd = im.renders[slot];
-        PixelMeans(sk, w, &rd.re[row], &rd.im[row], &rd.dc[row], &rd.scat_re[row], &rd.scat_im[row],
-                   &rd.scat_dc[row], fpn, sr.a[slot].data(), sr.b[slot].data(),
-                   sr.cos_p[slot].data(), sr.sin_p[slot].data(), sr.shift.data());
-      }
-      TapMeans(w, slots, sr);
-      const std::size_t at = sr.RowOffset();
-      NoiseScales(w, read_var, sigma_scale, sr.mu[0].data() + at, sr.mu[1].data() + at,
-                  sr.mu[2].data() + at, sr.mu[3].data() + at, sr.a_mean.data(), sr.b_mean.data(),
-                  sr.sd[0].data() + at, sr.sd[1].data() + at, sr.sd[2].data() + at,
-                  sr.sd[3].data() + at, sr.sigma.data(), sr.noise.data());
-      // Shot and read noise, one random stream per row. Draws in the order of Rng::Poisson then
-      // the read noise, per tap: drawing shot plus read noise as one N(mu, mu + s^2) would be the
-      // same distribution with half the draws, but a different realisation, and statistics
-      // evaluated on single frames (experiments fig. 6-7) depend on the realisation. The rows
-      // wait in blocks of eight (the AVX-512 form draws eight streams at once); nothing below
-      // reads the taps.
-      sr.block_seed[sr.block_rows] = RowSeed(frame_seed, r);
-      sr.block_row[sr.block_rows] = r;
-      ++sr.block_rows;
-      if (sr.block_rows == SensorRow::kNoiseBlockRows || r + 1 == r1) {
-        const double* const mu[4] = {sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(),
-                                     sr.mu[3].data()};
-        const float* const sd[4] = {sr.sd[0].data(), sr.sd[1].data(), sr.sd[2].data(),
-                                    sr.sd[3].data()};
-        float* tap_rows[SensorRow::kNoiseBlockRows][4];
-        for (int j = 0; j < sr.block_rows; ++j) {
-          const std::size_t row_at = static_cast<std::size_t>(sr.block_row[j]) * w;
-          for (int k = 0; k < 4; ++k) tap_rows[j][k] = &im.taps[k][row_at];
-        }
-        NoisyTapsRows(sr.block_rows, w, static_cast<std::size_t>(w), sr.block_seed, opt.shot_noise,
-                      read_sigma, mu, sd, tap_rows);
-        sr.block_rows = 0;
-      }
-      // Ground truth.
-      const Render& rd = im.renders[0];
-      if (cos_bias >= 0) {
-        TruthCauses(w, cos_bias * cos_bias, t_int_s, opt.truth_mixed_span_m, range, &rd.re[row],
-                    &rd.im[row], &rd.direct_re[row], &rd.direct_im[row], &rd.scat_re[row],
-                    &rd.scat_im[row], &rd.span_m[row], &im.truth_distance[row], sr.causes.data());
-      }
-      for (int c = 0; c < w; ++c) {
-        const std::size_t p = row + c;
-        PixelFlags causes(sr.causes[c]);
-        const float td = im.truth_distance[p];
-        if (cos_bias < 0) {
-          // Truth causes from the noiseless components.
-          const double ind_re = rd.re[p] - rd.direct_re[p], ind_im = rd.im[p] - rd.direct_im[p];
-          const double ind2 = ind_re * ind_re + ind_im * ind_im;
-          const double dir2 = static_cast<double>(rd.direct_re[p]) * rd.direct_re[p] +
-                              static_cast<double>(rd.direct_im[p]) * rd.direct_im[p];
-          // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct one.
-          if (ind2 > 0 &&
-              (ind2 >= dir2 || differ(rd.re[p], rd.im[p], rd.direct_re[p], rd.direct_im[p]))) {
-            causes.Set(Flag::kMultipath);
+  ParallelRows(
+      h, opt.threads,
+      [&](int r0, int r1, int thread) {
+        SensorRow& sr = im.scratch[thread].sensor;
+        sr.Resize(w);
+        for (int r = r0; r < r1; ++r) {
+          const std::size_t row = static_cast<std::size_t>(r) * w;
+          const float* fpn = &im.fpn_m[row];  // zeros when the fixed pattern is off
+          // Noiseless means of the four taps (each from its own rendering when the scene moves).
+          for (int slot = 0; slot < slots; ++slot) {
+            const Render& rd = im.renders[slot];
+            PixelMeans(sk, w, &rd.re[row], &rd.im[row], &rd.dc[row], &rd.scat_re[row],
+                       &rd.scat_im[row], &rd.scat_dc[row], fpn, sr.a[slot].data(),
+                       sr.b[slot].data(), sr.cos_p[slot].data(), sr.sin_p[slot].data(),
+                       sr.shift.data());
           }
-          if (rd.scat_re[p] != 0 || rd.scat_im[p] != 0) {
-            const double re = (rd.re[p] + rd.scat_re[p]) * t_int_s;
-            const double imag = (rd.im[p] + rd.scat_im[p]) * t_int_s;
-            if (differ(re, imag, rd.re[p], rd.im[p])) causes.Set(Flag::kScattering);
+          TapMeans(w, slots, sr);
+          const std::size_t at = sr.RowOffset();
+          NoiseScales(w, read_var, sigma_scale, sr.mu[0].data() + at, sr.mu[1].data() + at,
+                      sr.mu[2].data() + at, sr.mu[3].data() + at, sr.a_mean.data(),
+                      sr.b_mean.data(), sr.sd[0].data() + at, sr.sd[1].data() + at,
+                      sr.sd[2].data() + at, sr.sd[3].data() + at, sr.sigma.data(), sr.noise.data());
+          // Shot and read noise, one random stream per row. Draws in the order of Rng::Poisson then
+          // the read noise, per tap: drawing shot plus read noise as one N(mu, mu + s^2) would be
+          // the same distribution with half the draws, but a different realisation, and statistics
+          // evaluated on single frames (experiments fig. 6-7) depend on the realisation. The rows
+          // wait in blocks of eight (the AVX-512 form draws eight streams at once); nothing below
+          // reads the taps.
+          sr.block_seed[sr.block_rows] = RowSeed(frame_seed, r);
+          sr.block_row[sr.block_rows] = r;
+          ++sr.block_rows;
+          if (sr.block_rows == SensorRow::kNoiseBlockRows || r + 1 == r1) {
+            const double* const mu[4] = {sr.mu[0].data(), sr.mu[1].data(), sr.mu[2].data(),
+                                         sr.mu[3].data()};
+            const float* const sd[4] = {sr.sd[0].data(), sr.sd[1].data(), sr.sd[2].data(),
+                                        sr.sd[3].data()};
+            float* tap_rows[SensorRow::kNoiseBlockRows][4];
+            for (int j = 0; j < sr.block_rows; ++j) {
+              const std::size_t row_at = static_cast<std::size_t>(sr.block_row[j]) * w;
+              for (int k = 0; k < 4; ++k) tap_rows[j][k] = &im.taps[k][row_at];
+            }
+            NoisyTapsRows(sr.block_rows, w, static_cast<std::size_t>(w), sr.block_seed,
+                          opt.shot_noise, read_sigma, mu, sd, tap_rows);
+            sr.block_rows = 0;
           }
-          if (rd.span_m[p] > opt.truth_mixed_span_m) causes.Set(Flag::kMixed);
-          if (!(td < kInf)) causes.Set(Flag::kNoReturn);
-          if (td >= range && td < kInf) causes.Set(Flag::kBeyondUnambiguous);
+          // Ground truth.
+          const Render& rd = im.renders[0];
+          if (cos_bias >= 0) {
+            TruthCauses(w, cos_bias * cos_bias, t_int_s, opt.truth_mixed_span_m, range, &rd.re[row],
+                        &rd.im[row], &rd.direct_re[row], &rd.direct_im[row], &rd.scat_re[row],
+                        &rd.scat_im[row], &rd.span_m[row], &im.truth_distance[row],
+                        sr.causes.data());
+          }
+          for (int c = 0; c < w; ++c) {
+            const std::size_t p = row + c;
+            PixelFlags causes(sr.causes[c]);
+            const float td = im.truth_distance[p];
+            if (cos_bias < 0) {
+              // Truth causes from the noiseless components.
+              const double ind_re = rd.re[p] - rd.direct_re[p], ind_im = rd.im[p] - rd.direct_im[p];
+              const double ind2 = ind_re * ind_re + ind_im * ind_im;
+              const double dir2 = static_cast<double>(rd.direct_re[p]) * rd.direct_re[p] +
+                                  static_cast<double>(rd.direct_im[p]) * rd.direct_im[p];
+              // Multipath: the indirect paths shift the phase noticeably, or outweigh the direct
+              // one.
+              if (ind2 > 0 &&
+                  (ind2 >= dir2 || differ(rd.re[p], rd.im[p], rd.direct_re[p], rd.direct_im[p]))) {
+                causes.Set(Flag::kMultipath);
+              }
+              if (rd.scat_re[p] != 0 || rd.scat_im[p] != 0) {
+                const double re = (rd.re[p] + rd.scat_re[p]) * t_int_s;
+                const double imag = (rd.im[p] + rd.scat_im[p]) * t_int_s;
+                if (differ(re, imag, rd.re[p], rd.im[p])) causes.Set(Flag::kScattering);
+              }
+              if (rd.span_m[p] > opt.truth_mixed_span_m) causes.Set(Flag::kMixed);
+              if (!(td < kInf)) causes.Set(Flag::kNoReturn);
+              if (td >= range && td < kInf) causes.Set(Flag::kBeyondUnambiguous);
+            }
+            float near = rd.near_m[p], far = rd.far_m[p];
+            bool moved = false;
+            for (int k = 1; k < slots; ++k) {
+              const Render& rk = im.renders[k];
+              moved = moved || differ(rk.re[p], rk.im[p], rd.re[p], rd.im[p]);
+              near = std::min(near, rk.near_m[p]);
+              far = std::max(far, rk.far_m[p]);
+            }
+            if (moved) causes.Set(Flag::kMotion);
+            truth.footprint_near_m[p] = near;
+            truth.footprint_far_m[p] = far > 0 ? far : kInf;
+            truth.radial_distance_m[p] = td;
+            truth.sigma_m[p] = sr.sigma[c];
+            im.truth_noise_e2[p] = sr.noise[c];
+            truth.causes[p] = causes;
+          }
         }
-        float near = rd.near_m[p], far = rd.far_m[p];
-        bool moved = false;
-        for (int k = 1; k < slots; ++k) {
-          const Render& rk = im.renders[k];
-          moved = moved || differ(rk.re[p], rk.im[p], rd.re[p], rd.im[p]);
-          near = std::min(near, rk.near_m[p]);
-          far = std::max(far, rk.far_m[p]);
-        }
-        if (moved) causes.Set(Flag::kMotion);
-        truth.footprint_near_m[p] = near;
-        truth.footprint_far_m[p] = far > 0 ? far : kInf;
-        truth.radial_distance_m[p] = td;
-        truth.sigma_m[p] = sr.sigma[c];
-        im.truth_noise_e2[p] = sr.noise[c];
-        truth.causes[p] = causes;
-      }
-    }
-  });
+      },
+      SensorRow::kNoiseBlockRows);  // chunks of whole noise blocks (NoisyTapsRows)
   if (opt.saturation) {
     if (Saturate(im.taps, im.bloom_mean, im.tmp2, w, h, model.blooming_sigma_px, full_well,
                  model.overflow_fraction, opt.blooming ? model.blooming_fraction : 0.0, frame_seed,
