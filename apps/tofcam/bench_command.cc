@@ -129,20 +129,26 @@ Input MakeInput(int width, int height, int frames, double delta_l_scale,
   return in;
 }
 
-// Per-thread state: own copies of the inputs and own output buffers.
-// The memcpy floor's source and destination: page-aligned, touched once, reused. Allocated
-// apart from the heap's placement, so the floor does not depend on where the allocator puts two
-// large blocks (the CLI keeps freed memory in the heap, main.cc; with the default policy they
-// are fresh mappings).
+// The memcpy floor's source and destination: page-aligned, touched once, reused. The alignment
+// is fixed so the floor does not depend on where the allocator happens to place two large blocks
+// (with the CLI's allocator policy, main.cc, they come from the heap; by default from fresh
+// mappings). Destination minus source is a multiple of 4096 then; glibc's memcpy copied such
+// buffers as fast as ones 64 or 2112 bytes apart on the Zen 5 of docs/benchmarks.md (60 KB to
+// 13 MB, five alternated rounds).
 class CopyBuffers {
  public:
   void Ensure(std::size_t bytes) {
+    bytes = std::max<std::size_t>(bytes, 1);  // never null pointers, even for an empty copy
     if (bytes <= size_) return;
     constexpr std::size_t kPage = 4096;
     const std::size_t rounded = (bytes + kPage - 1) / kPage * kPage;
+    size_ = 0;
     src_.reset(static_cast<char*>(std::aligned_alloc(kPage, rounded)));
     dst_.reset(static_cast<char*>(std::aligned_alloc(kPage, rounded)));
-    if (!src_ || !dst_) throw Error(ErrorCode::kInternal, "bench: cannot allocate copy buffers");
+    if (!src_ || !dst_) {
+      throw Error(ErrorCode::kUnsupported, "bench: cannot allocate " + std::to_string(2 * rounded) +
+                                               " bytes for the memcpy floor");
+    }
     std::memset(src_.get(), 1, rounded);  // touched now: no page faults in the floor
     std::memset(dst_.get(), 0, rounded);
     size_ = rounded;
@@ -159,6 +165,7 @@ class CopyBuffers {
   std::size_t size_ = 0;
 };
 
+// Per-thread state: own copies of the inputs and own output buffers.
 struct Workspace {
   const Input* input = nullptr;
   std::vector<Frame> frames;

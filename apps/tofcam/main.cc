@@ -31,9 +31,10 @@ namespace {
 // at camera rate; by default glibc serves blocks above 128 KB with mmap, or (after its dynamic
 // threshold rises) returns the freed top of the heap, so every frame's images are page-faulted
 // in and zero-filled by the kernel again: `tofcam run` on the simulated 640x480 camera took
-// 2.1 times as long (docs/benchmarks.md). Thresholds: below 32 MiB from the heap (glibc's
-// largest mmap threshold), at most 512 MiB of free heap kept. Library users get the same with
-// GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432 (docs/benchmarks.md).
+// 2.1 times as long (docs/benchmarks.md). Thresholds: blocks below 32 MiB from the heap (glibc's
+// largest mmap threshold); the free top of a heap is returned to the kernel only beyond 512 MiB.
+// Library users get the same with GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:
+// glibc.malloc.trim_threshold=536870912 (one string; docs/python.md).
 void KeepFreedMemory() {
 #if defined(__GLIBC__)
   mallopt(M_MMAP_THRESHOLD, 32 << 20);

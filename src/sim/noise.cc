@@ -76,6 +76,9 @@ void NoisyTaps(int n, std::uint64_t seed, bool shot_noise, double read_sigma,
 
 namespace {
 
+#if defined(TOFCAM_AVX512_FORMS)
+// The scalar helpers of the AVX-512 form (compiled for the baseline; only that form calls them).
+
 // The eight streams of NoisyTaps8 as a state table: word w of lane j's xoshiro state is
 // words[w][j] (the layout of four 8-lane vectors).
 using LaneStates = std::uint64_t[4][8];
@@ -112,7 +115,6 @@ void StoreLane(const Rng& rng, int j, LaneStates& words) {
   }
 }
 
-#if defined(TOFCAM_AVX512_FORMS)
 TOFCAM_AVX512_DIAGNOSTICS_BEGIN
 
 struct Streams {

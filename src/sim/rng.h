@@ -58,11 +58,7 @@ class Rng {
   explicit Rng(std::uint64_t seed) { Seed(seed); }
   /// The generator continuing from a state taken with state() (the AVX-512 form of NoisyTaps
   /// runs eight streams in vector lanes and hands a lane to this class for its rare draws).
-  static Rng FromState(const std::array<std::uint64_t, 4>& state) {
-    Rng r(0);
-    r.s_ = state;
-    return r;
-  }
+  static Rng FromState(const std::array<std::uint64_t, 4>& state) { return Rng(state); }
   [[nodiscard]] const std::array<std::uint64_t, 4>& state() const { return s_; }
   void Seed(std::uint64_t seed) {
     for (auto& w : s_) w = SplitMix64(seed);
@@ -114,6 +110,7 @@ class Rng {
   }
 
  private:
+  explicit Rng(const std::array<std::uint64_t, 4>& state) : s_(state) {}
   static std::uint64_t Rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
   std::array<std::uint64_t, 4> s_{};
   const NormalTable& table_ = GetNormalTable();

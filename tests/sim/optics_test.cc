@@ -52,13 +52,14 @@ TEST(OpticsTest, BlurLosesTheLightThatLeavesTheSensor) {
 
 TEST(OpticsTest, BoxBlurIsTheWholeImageBlurBitForBit) {
   // Non-negative images that are zero outside a box: boxes in the middle, touching every edge,
-  // narrower than the kernel, one pixel, and the whole image; kernels of radius 1 to 7 (sigma up
-  // to 2.3 px, wider than some images). Stale scratch must not leak in: tmp starts as garbage.
+  // narrower than the kernel, one pixel, and the whole image; kernels of radius 1 to 12 (sigma
+  // up to 4 px: 25 taps, wider than the 23 x 19 image). Stale scratch must not leak in: tmp
+  // starts as NaN.
   const int w = 23, h = 19;
   const int boxes[][4] = {{5, 9, 6, 12},  {0, 4, 0, 3},    {15, 19, 20, 23}, {0, 19, 0, 23},
                           {8, 9, 11, 12}, {0, 19, 10, 11}, {3, 4, 0, 23},    {17, 19, 0, 2}};
   int compared = 0;
-  for (const double sigma : {0.3, 1.0, 2.3}) {
+  for (const double sigma : {0.3, 1.0, 2.3, 4.0}) {
     const std::vector<float> k = GaussianKernel(sigma);
     for (const auto& b : boxes) {
       std::vector<float> img(static_cast<std::size_t>(w) * h, 0.f);

@@ -4,12 +4,17 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <numeric>
 #include <random>
 #include <vector>
 
+#include "optics.h"
+#include "rng.h"
+#include "saturation.h"
 #include "tofcam/core/pixel_flags.h"
 #include "tofcam/core/units.h"
 
@@ -194,6 +199,107 @@ TEST(SensorTest, SaturationClipsAndBloomsTheSpillIntoTheNeighboursConservingChar
   EXPECT_FLOAT_EQ(taps[2][nb], taps[3][nb]);
   EXPECT_GT(taps[0][nb], 100.f);
   EXPECT_FLOAT_EQ(taps[0][0], 100.f);  // 7 px away: beyond the kernel radius of 3 px
+}
+
+// Saturate by its definition, pixel by pixel over the whole image (the form before blocks without
+// overflow were skipped and the blooming blur and noise were bounded by the spilling pixels' box):
+// OverflowPixel everywhere, the blur of the whole image, then per row its own stream drawing a
+// Poisson spill for every pixel with bloom.
+bool SaturateByDefinition(std::vector<float> (&taps)[4], std::vector<float>& bloom_mean, int w,
+                          int h, double sigma_px, double full_well, double overflow, double bloom,
+                          std::uint64_t frame_seed, bool shot_noise) {
+  const std::size_t np = taps[0].size();
+  bloom_mean.assign(np, 0.f);
+  bool any = false;
+  for (std::size_t i = 0; i < np; ++i) {
+    float n[4];
+    for (int k = 0; k < 4; ++k) n[k] = taps[k][i];
+    const float out = OverflowPixel(n, static_cast<float>(full_well), static_cast<float>(overflow));
+    for (int k = 0; k < 4; ++k) taps[k][i] = n[k];
+    const float spill = static_cast<float>(bloom) * out;
+    if (spill > 0) {
+      bloom_mean[i] = spill / 4;
+      any = true;
+    }
+  }
+  if (!any) return false;
+  std::vector<float> tmp;
+  BlurInPlace(bloom_mean, tmp, w, h, sigma_px);
+  for (int r = 0; r < h; ++r) {
+    Rng rng(frame_seed ^ 0xB10060000000000Dull ^
+            (static_cast<std::uint64_t>(r) * 0xA24BAED4963EE407ull));
+    for (int c = 0; c < w; ++c) {
+      const float mean = bloom_mean[static_cast<std::size_t>(r) * w + c];
+      if (!(mean > 0)) continue;
+      for (auto& tap : taps) {
+        tap[static_cast<std::size_t>(r) * w + c] +=
+            shot_noise ? static_cast<float>(rng.Poisson(mean)) : mean;
+      }
+    }
+  }
+  return true;
+}
+
+TEST(SensorTest, SaturationEqualsItsWholeImageDefinitionBitForBit) {
+  // Overflowing pixels at the image's corners and edges, on both sides of the 64-pixel blocks the
+  // overflow scan skips by, alone and in clusters; NaN and negative taps; blooming kernels from
+  // radius 1 to wider than the image; with and without shot noise. Stale scratch (NaN) must not
+  // leak into the result.
+  const int w = 37, h = 23;  // 851 pixels: blocks of 64 end mid-row
+  const std::size_t np = static_cast<std::size_t>(w) * h;
+  const std::vector<std::vector<std::size_t>> hot = {
+      {0},
+      {np - 1},
+      {63, 64, 127, 128},
+      {w - 1, static_cast<std::size_t>(w) * (h - 1), 400, 401, 402, 400 + w},
+      {},
+  };
+  int compared = 0, bloomed = 0;
+  for (const double sigma : {0.3, 1.5, 9.0}) {
+    for (const bool shot : {false, true}) {
+      for (const auto& pixels : hot) {
+        std::vector<float> taps[4];
+        for (int k = 0; k < 4; ++k) {
+          taps[k].resize(np);
+          for (std::size_t i = 0; i < np; ++i) {
+            taps[k][i] =
+                200.f + static_cast<float>((i * 13 + static_cast<std::size_t>(k) * 5) % 300);
+          }
+        }
+        taps[2][500] = std::numeric_limits<float>::quiet_NaN();
+        taps[3][501] = -40.f;
+        for (std::size_t p : pixels) {
+          taps[p % 4][p] = 1100.f + static_cast<float>(p % 7) * 300.f;  // above the full well
+          taps[(p + 1) % 4][p] = 980.f;
+        }
+        std::vector<float> want[4] = {taps[0], taps[1], taps[2], taps[3]};
+        std::vector<float> bloom_mean, want_bloom, tmp(np, std::numeric_limits<float>::quiet_NaN());
+        const bool got_any =
+            Saturate(taps, bloom_mean, tmp, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot);
+        const bool want_any =
+            SaturateByDefinition(want, want_bloom, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot);
+        ASSERT_EQ(got_any, want_any) << "sigma " << sigma;
+        bloomed += got_any;
+        for (int k = 0; k < 4; ++k) {
+          for (std::size_t i = 0; i < np; ++i) {
+            ASSERT_EQ(std::bit_cast<std::uint32_t>(taps[k][i]),
+                      std::bit_cast<std::uint32_t>(want[k][i]))
+                << "sigma " << sigma << " shot " << shot << " tap " << k << " pixel " << i;
+            ++compared;
+          }
+        }
+        if (got_any) {
+          for (std::size_t i = 0; i < np; ++i) {
+            ASSERT_EQ(std::bit_cast<std::uint32_t>(bloom_mean[i]),
+                      std::bit_cast<std::uint32_t>(want_bloom[i]))
+                << "bloom at pixel " << i;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_EQ(bloomed, 24);  // every case with overflowing pixels bloomed
+  EXPECT_GT(compared, 60000);
 }
 
 }  // namespace
