@@ -54,7 +54,7 @@ void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
 }
 
 void BlurBoxInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
-                    const std::vector<float>& k, int r0, int r1, int c0, int c1) {
+                    const std::vector<float>& k, int r0, int r1, int c0, int c1, RowPool* pool) {
   const int radius = static_cast<int>(k.size() / 2);
   // The output box: every pixel within the kernel's reach of the input box.
   const int o_r0 = std::max(0, r0 - radius), o_r1 = std::min(h, r1 + radius);
@@ -62,26 +62,30 @@ void BlurBoxInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int
   if (tmp.size() < img.size()) tmp.resize(img.size());
   // Horizontal pass over the input box's rows (the others are zero), BlurInPlace's loops
   // restricted to the output box's columns.
-  for (int r = r0; r < r1; ++r) {
-    const float* in = &img[static_cast<std::size_t>(r) * w];
-    float* out = &tmp[static_cast<std::size_t>(r) * w];
-    std::fill(out + o_c0, out + o_c1, 0.f);
-    for (int i = -radius; i <= radius; ++i) {
-      const float kv = k[i + radius];
-      for (int c = std::max(o_c0, -i); c < std::min(o_c1, w - i); ++c) out[c] += kv * in[c + i];
+  RunRows(pool, r1 - r0, [&](int a, int b) {
+    for (int r = r0 + a; r < r0 + b; ++r) {
+      const float* in = &img[static_cast<std::size_t>(r) * w];
+      float* out = &tmp[static_cast<std::size_t>(r) * w];
+      std::fill(out + o_c0, out + o_c1, 0.f);
+      for (int i = -radius; i <= radius; ++i) {
+        const float kv = k[i + radius];
+        for (int c = std::max(o_c0, -i); c < std::min(o_c1, w - i); ++c) out[c] += kv * in[c + i];
+      }
     }
-  }
+  });
   // Vertical pass into the output box, skipping the zero rows outside the input box.
-  for (int r = o_r0; r < o_r1; ++r) {
-    const int lo = std::max(-radius, r0 - r), hi = std::min(radius, r1 - 1 - r);
-    float* out = &img[static_cast<std::size_t>(r) * w];
-    std::fill(out + o_c0, out + o_c1, 0.f);
-    for (int i = lo; i <= hi; ++i) {
-      const float kv = k[i + radius];
-      const float* in = &tmp[static_cast<std::size_t>(r + i) * w];
-      for (int c = o_c0; c < o_c1; ++c) out[c] += kv * in[c];
+  RunRows(pool, o_r1 - o_r0, [&](int a, int b) {
+    for (int r = o_r0 + a; r < o_r0 + b; ++r) {
+      const int lo = std::max(-radius, r0 - r), hi = std::min(radius, r1 - 1 - r);
+      float* out = &img[static_cast<std::size_t>(r) * w];
+      std::fill(out + o_c0, out + o_c1, 0.f);
+      for (int i = lo; i <= hi; ++i) {
+        const float kv = k[i + radius];
+        const float* in = &tmp[static_cast<std::size_t>(r + i) * w];
+        for (int c = o_c0; c < o_c1; ++c) out[c] += kv * in[c];
+      }
     }
-  }
+  });
 }
 
 ScatterPlan PlanScatter(const std::vector<ScatterLobe>& lobes, int width, int height) {

@@ -26,8 +26,11 @@ void BlurInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
 /// radius is computed (the rest of img stays zero; tmp outside it is neither read nor written).
 /// Every output sums the same products in the same order as BlurInPlace, less products with a
 /// zero pixel, which add +0 to a sum >= +0: the same values bit for bit.
+/// Its row loops run on `pool` when one is given (every output row is computed alone: the same
+/// values on any number of threads).
 void BlurBoxInPlace(std::vector<float>& img, std::vector<float>& tmp, int w, int h,
-                    const std::vector<float>& k, int r0, int r1, int c0, int c1);
+                    const std::vector<float>& k, int r0, int r1, int c0, int c1,
+                    RowPool* pool = nullptr);
 
 /// Scattering: reduction factor, reduced size, lobe kernels and bilinear upsampling taps.
 struct ScatterPlan {

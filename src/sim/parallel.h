@@ -99,6 +99,17 @@ class RowPool {
   std::atomic<int> next_{0};
 };
 
+// Runs body(row_begin, row_end) over [0, rows) on `pool`'s threads, or on the calling thread
+// when `pool` is null; for row loops whose results do not depend on the thread.
+template <typename F>
+void RunRows(RowPool* pool, int rows, const F& body) {
+  if (pool == nullptr) {
+    body(0, rows);
+    return;
+  }
+  pool->Run(rows, [&body](int r0, int r1, int /*thread*/) { body(r0, r1); });
+}
+
 // Runs body(row_begin, row_end, thread_index) over [0, rows) on `threads` threads (the caller's
 // included), spawning them per call. Grab() shadows it with the camera's persistent RowPool; this
 // version stays for row loops elsewhere (e.g. if the sensor retune adds one to Bloom).

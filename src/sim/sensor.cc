@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <mutex>
 
 #include "../core/fast_atan2.h"
 #include "fast_math.h"
@@ -178,58 +179,78 @@ TOFCAM_SIM_LOOP void TruthCauses(int n, double cos_bias2, double t_int_s, double
 bool Saturate(std::vector<float> (&taps)[4], std::vector<float>& bloom_mean,
               std::vector<float>& tmp, int width, int height, double blooming_sigma_px,
               double full_well, double overflow, double bloom, std::uint64_t frame_seed,
-              bool shot_noise) {
+              bool shot_noise, RowPool* pool) {
   const std::size_t np = taps[0].size();
+  const std::size_t w = static_cast<std::size_t>(width);
   const float fw = static_cast<float>(full_well);
   const float keep_share = static_cast<float>(overflow);
   const float out_share = static_cast<float>(bloom);
-  bloom_mean.assign(np, 0.f);
+  bloom_mean.resize(np);  // zeroed row by row below
   // Most pixels hold no tap above the full well, and OverflowPixel leaves those as they are:
   // blocks without one are skipped after a vectorised count. The box of the spilling pixels
   // bounds the blur and the blooming noise below (zero elsewhere).
   int r0 = height, r1 = 0, c0 = width, c1 = 0;
-  constexpr std::size_t kBlock = 64;
-  for (std::size_t b = 0; b < np; b += kBlock) {
-    const std::size_t end = std::min(np, b + kBlock);
-    if (CountOverFullWell(end - b, fw, &taps[0][b], &taps[1][b], &taps[2][b], &taps[3][b]) == 0) {
-      continue;
-    }
-    for (std::size_t i = b; i < end; ++i) {
-      float n[4];
-      for (int k = 0; k < 4; ++k) n[k] = taps[k][i];
-      const float out = OverflowPixel(n, fw, keep_share);
-      for (int k = 0; k < 4; ++k) taps[k][i] = n[k];
-      const float spill = out_share * out;
-      if (spill > 0) {
-        bloom_mean[i] = spill / 4;  // per tap of the receiving pixel
-        const int r = static_cast<int>(i / static_cast<std::size_t>(width));
-        const int c = static_cast<int>(i % static_cast<std::size_t>(width));
-        r0 = std::min(r0, r);
-        r1 = std::max(r1, r + 1);
-        c0 = std::min(c0, c);
-        c1 = std::max(c1, c + 1);
+  std::mutex box_mutex;
+  RunRows(pool, height, [&](int ra, int rb) {
+    const std::size_t begin = static_cast<std::size_t>(ra) * w;
+    const std::size_t end = static_cast<std::size_t>(rb) * w;
+    std::fill(bloom_mean.begin() + static_cast<std::ptrdiff_t>(begin),
+              bloom_mean.begin() + static_cast<std::ptrdiff_t>(end), 0.f);
+    int br0 = height, br1 = 0, bc0 = width, bc1 = 0;
+    constexpr std::size_t kBlock = 64;
+    for (std::size_t b = begin; b < end; b += kBlock) {
+      const std::size_t block_end = std::min(end, b + kBlock);
+      if (CountOverFullWell(block_end - b, fw, &taps[0][b], &taps[1][b], &taps[2][b],
+                            &taps[3][b]) == 0) {
+        continue;
+      }
+      for (std::size_t i = b; i < block_end; ++i) {
+        float n[4];
+        for (int k = 0; k < 4; ++k) n[k] = taps[k][i];
+        const float out = OverflowPixel(n, fw, keep_share);
+        for (int k = 0; k < 4; ++k) taps[k][i] = n[k];
+        const float spill = out_share * out;
+        if (spill > 0) {
+          bloom_mean[i] = spill / 4;  // per tap of the receiving pixel
+          const int r = static_cast<int>(i / w);
+          const int c = static_cast<int>(i % w);
+          br0 = std::min(br0, r);
+          br1 = std::max(br1, r + 1);
+          bc0 = std::min(bc0, c);
+          bc1 = std::max(bc1, c + 1);
+        }
       }
     }
-  }
+    if (br1 > br0) {
+      const std::lock_guard<std::mutex> lock(box_mutex);
+      r0 = std::min(r0, br0);
+      r1 = std::max(r1, br1);
+      c0 = std::min(c0, bc0);
+      c1 = std::max(c1, bc1);
+    }
+  });
   if (r1 <= r0) return false;  // nothing spilled
   const std::vector<float> kernel = GaussianKernel(blooming_sigma_px);
-  BlurBoxInPlace(bloom_mean, tmp, width, height, kernel, r0, r1, c0, c1);
+  BlurBoxInPlace(bloom_mean, tmp, width, height, kernel, r0, r1, c0, c1, pool);
   // Rows and columns beyond the blurred box have no bloom (their streams are not drawn from, as
   // before: a pixel without bloom draws nothing).
   const int radius = static_cast<int>(kernel.size() / 2);
-  const int c_end = std::min(width, c1 + radius);
-  for (int r = std::max(0, r0 - radius); r < std::min(height, r1 + radius); ++r) {
-    Rng rng(frame_seed ^ 0xB10060000000000Dull ^
-            (static_cast<std::uint64_t>(r) * 0xA24BAED4963EE407ull));
-    for (int c = std::max(0, c0 - radius); c < c_end; ++c) {
-      const std::size_t i = static_cast<std::size_t>(r) * width + c;
-      const float mean = bloom_mean[i];
-      if (!(mean > 0)) continue;
-      for (auto& tap : taps) {
-        tap[i] += shot_noise ? static_cast<float>(rng.Poisson(mean)) : mean;
+  const int o_r0 = std::max(0, r0 - radius), o_r1 = std::min(height, r1 + radius);
+  const int o_c0 = std::max(0, c0 - radius), o_c1 = std::min(width, c1 + radius);
+  RunRows(pool, o_r1 - o_r0, [&](int a, int b) {
+    for (int r = o_r0 + a; r < o_r0 + b; ++r) {
+      Rng rng(frame_seed ^ 0xB10060000000000Dull ^
+              (static_cast<std::uint64_t>(r) * 0xA24BAED4963EE407ull));
+      for (int c = o_c0; c < o_c1; ++c) {
+        const std::size_t i = static_cast<std::size_t>(r) * w + static_cast<std::size_t>(c);
+        const float mean = bloom_mean[i];
+        if (!(mean > 0)) continue;
+        for (auto& tap : taps) {
+          tap[i] += shot_noise ? static_cast<float>(rng.Poisson(mean)) : mean;
+        }
       }
     }
-  }
+  });
   return true;
 }
 

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "parallel.h"
 #include "saturation.h"
 #include "tofcam/core/units.h"
 
@@ -86,10 +87,12 @@ void TruthCauses(int n, double cos_bias2, double t_int_s, double mixed_span_m, d
 /// Saturation physics on the noisy tap charges (electrons) of a width x height sensor; see the
 /// comment at the definition. Returns true when charge bloomed; bloom_mean then holds the mean
 /// spill per tap of every pixel. tmp is scratch.
+/// Its row loops run on `pool` when one is given (rows are independent and each draws from its
+/// own stream: the same values on any number of threads).
 bool Saturate(std::vector<float> (&taps)[4], std::vector<float>& bloom_mean,
               std::vector<float>& tmp, int width, int height, double blooming_sigma_px,
               double full_well, double overflow, double bloom, std::uint64_t frame_seed,
-              bool shot_noise);
+              bool shot_noise, RowPool* pool = nullptr);
 
 /// The registers of one pixel and whether it saturated.
 struct PixelRegisters {

@@ -647,20 +647,11 @@ std::optional<Frame> SimulatedCamera::Grab() {
         }
       },
       SensorRow::kNoiseBlockRows);  // chunks of whole noise blocks (NoisyTapsRows)
-  if (opt.saturation) {
-    if (Saturate(im.taps, im.bloom_mean, im.tmp2, w, h, model.blooming_sigma_px, full_well,
-                 model.overflow_fraction, opt.blooming ? model.blooming_fraction : 0.0, frame_seed,
-                 opt.shot_noise)) {
-      // The spilled charge is offset without amplitude: it raises the true shot-noise sigma by
-      // sqrt((B + spill) / B) (B including the read-noise variance).
-      for (std::size_t p = 0; p < im.bloom_mean.size(); ++p) {
-        if (im.bloom_mean[p] > 0 && im.truth_noise_e2[p] > 0) {
-          truth.sigma_m[p] *=
-              std::sqrt((im.truth_noise_e2[p] + im.bloom_mean[p]) / im.truth_noise_e2[p]);
-        }
-      }
-    }
-  }
+  const bool bloomed =
+      opt.saturation &&
+      Saturate(im.taps, im.bloom_mean, im.tmp2, w, h, model.blooming_sigma_px, full_well,
+               model.overflow_fraction, opt.blooming ? model.blooming_fraction : 0.0, frame_seed,
+               opt.shot_noise, im.pool.get());
   // Clip, demodulate and quantise.
   const double gain = model.gain_reg_per_e;
   ParallelRows(h, opt.threads, [&](int r0, int r1, int thread) {
@@ -673,6 +664,17 @@ std::optional<Frame> SimulatedCamera::Grab() {
       DemodulateRow(w, taps, opt.saturation, full_well, gain, offset_register_,
                     frame.distance.Row(r).data(), frame.amplitude.Row(r).data(),
                     frame.intensity.Row(r).data(), saturated.data());
+      if (bloomed) {
+        // The spilled charge is offset without amplitude: it raises the true shot-noise sigma by
+        // sqrt((B + spill) / B) (B including the read-noise variance).
+        for (int c = 0; c < w; ++c) {
+          const std::size_t p = row + static_cast<std::size_t>(c);
+          if (im.bloom_mean[p] > 0 && im.truth_noise_e2[p] > 0) {
+            truth.sigma_m[p] *=
+                std::sqrt((im.truth_noise_e2[p] + im.bloom_mean[p]) / im.truth_noise_e2[p]);
+          }
+        }
+      }
       for (int c = 0; c < w; ++c) {
         if (saturated[static_cast<std::size_t>(c)] != 0)
           truth.causes[row + c].Set(Flag::kSaturated);

@@ -59,6 +59,7 @@ TEST(OpticsTest, BoxBlurIsTheWholeImageBlurBitForBit) {
   const int boxes[][4] = {{5, 9, 6, 12},  {0, 4, 0, 3},    {15, 19, 20, 23}, {0, 19, 0, 23},
                           {8, 9, 11, 12}, {0, 19, 10, 11}, {3, 4, 0, 23},    {17, 19, 0, 2}};
   int compared = 0;
+  RowPool two(2);
   for (const double sigma : {0.3, 1.0, 2.3, 4.0}) {
     const std::vector<float> k = GaussianKernel(sigma);
     for (const auto& b : boxes) {
@@ -70,10 +71,13 @@ TEST(OpticsTest, BoxBlurIsTheWholeImageBlurBitForBit) {
           img[static_cast<std::size_t>(r) * w + c] = v == 0 ? 0.f : std::ldexp(1.3f * v, v * 3);
         }
       }
-      std::vector<float> whole = img, box = img, tmp_whole;
+      std::vector<float> whole = img, box = img, pooled = img, tmp_whole;
       std::vector<float> tmp_box(img.size(), std::numeric_limits<float>::quiet_NaN());
+      std::vector<float> tmp_pooled = tmp_box;
       BlurInPlace(whole, tmp_whole, w, h, k);
       BlurBoxInPlace(box, tmp_box, w, h, k, b[0], b[1], b[2], b[3]);
+      BlurBoxInPlace(pooled, tmp_pooled, w, h, k, b[0], b[1], b[2], b[3], &two);
+      ASSERT_EQ(pooled, box) << "sigma " << sigma << " on a pool of two";
       for (std::size_t i = 0; i < img.size(); ++i) {
         ASSERT_EQ(std::bit_cast<std::uint32_t>(box[i]), std::bit_cast<std::uint32_t>(whole[i]))
             << "sigma " << sigma << " box " << b[0] << " " << b[1] << " " << b[2] << " " << b[3]

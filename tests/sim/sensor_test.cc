@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "optics.h"
+#include "parallel.h"
 #include "rng.h"
 #include "saturation.h"
 #include "tofcam/core/pixel_flags.h"
@@ -243,8 +244,9 @@ bool SaturateByDefinition(std::vector<float> (&taps)[4], std::vector<float>& blo
 TEST(SensorTest, SaturationEqualsItsWholeImageDefinitionBitForBit) {
   // Overflowing pixels at the image's corners and edges, on both sides of the 64-pixel blocks the
   // overflow scan skips by, alone and in clusters; NaN and negative taps; blooming kernels from
-  // radius 1 to wider than the image; with and without shot noise. Stale scratch (NaN) must not
-  // leak into the result.
+  // radius 1 to wider than the image; with and without shot noise; on the calling thread and on a
+  // pool of two (rows in chunks, each with its own stream). Stale scratch (NaN) must not leak into
+  // the result.
   const int w = 37, h = 23;  // 851 pixels: blocks of 64 end mid-row
   const std::size_t np = static_cast<std::size_t>(w) * h;
   const std::vector<std::vector<std::size_t>> hot = {
@@ -255,50 +257,55 @@ TEST(SensorTest, SaturationEqualsItsWholeImageDefinitionBitForBit) {
       {},
   };
   int compared = 0, bloomed = 0;
+  RowPool two(2);
   for (const double sigma : {0.3, 1.5, 9.0}) {
     for (const bool shot : {false, true}) {
       for (const auto& pixels : hot) {
-        std::vector<float> taps[4];
-        for (int k = 0; k < 4; ++k) {
-          taps[k].resize(np);
-          for (std::size_t i = 0; i < np; ++i) {
-            taps[k][i] =
-                200.f + static_cast<float>((i * 13 + static_cast<std::size_t>(k) * 5) % 300);
+        for (RowPool* pool : {static_cast<RowPool*>(nullptr), &two}) {
+          std::vector<float> taps[4];
+          for (int k = 0; k < 4; ++k) {
+            taps[k].resize(np);
+            for (std::size_t i = 0; i < np; ++i) {
+              taps[k][i] =
+                  200.f + static_cast<float>((i * 13 + static_cast<std::size_t>(k) * 5) % 300);
+            }
           }
-        }
-        taps[2][500] = std::numeric_limits<float>::quiet_NaN();
-        taps[3][501] = -40.f;
-        for (std::size_t p : pixels) {
-          taps[p % 4][p] = 1100.f + static_cast<float>(p % 7) * 300.f;  // above the full well
-          taps[(p + 1) % 4][p] = 980.f;
-        }
-        std::vector<float> want[4] = {taps[0], taps[1], taps[2], taps[3]};
-        std::vector<float> bloom_mean, want_bloom, tmp(np, std::numeric_limits<float>::quiet_NaN());
-        const bool got_any =
-            Saturate(taps, bloom_mean, tmp, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot);
-        const bool want_any =
-            SaturateByDefinition(want, want_bloom, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot);
-        ASSERT_EQ(got_any, want_any) << "sigma " << sigma;
-        bloomed += got_any;
-        for (int k = 0; k < 4; ++k) {
-          for (std::size_t i = 0; i < np; ++i) {
-            ASSERT_EQ(std::bit_cast<std::uint32_t>(taps[k][i]),
-                      std::bit_cast<std::uint32_t>(want[k][i]))
-                << "sigma " << sigma << " shot " << shot << " tap " << k << " pixel " << i;
-            ++compared;
+          taps[2][500] = std::numeric_limits<float>::quiet_NaN();
+          taps[3][501] = -40.f;
+          for (std::size_t p : pixels) {
+            taps[p % 4][p] = 1100.f + static_cast<float>(p % 7) * 300.f;  // above the full well
+            taps[(p + 1) % 4][p] = 980.f;
           }
-        }
-        if (got_any) {
-          for (std::size_t i = 0; i < np; ++i) {
-            ASSERT_EQ(std::bit_cast<std::uint32_t>(bloom_mean[i]),
-                      std::bit_cast<std::uint32_t>(want_bloom[i]))
-                << "bloom at pixel " << i;
+          std::vector<float> want[4] = {taps[0], taps[1], taps[2], taps[3]};
+          std::vector<float> bloom_mean, want_bloom,
+              tmp(np, std::numeric_limits<float>::quiet_NaN());
+          const bool got_any =
+              Saturate(taps, bloom_mean, tmp, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot, pool);
+          const bool want_any =
+              SaturateByDefinition(want, want_bloom, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot);
+          ASSERT_EQ(got_any, want_any) << "sigma " << sigma;
+          bloomed += got_any;
+          for (int k = 0; k < 4; ++k) {
+            for (std::size_t i = 0; i < np; ++i) {
+              ASSERT_EQ(std::bit_cast<std::uint32_t>(taps[k][i]),
+                        std::bit_cast<std::uint32_t>(want[k][i]))
+                  << "sigma " << sigma << " shot " << shot << " pool " << (pool != nullptr)
+                  << " tap " << k << " pixel " << i;
+              ++compared;
+            }
+          }
+          if (got_any) {
+            for (std::size_t i = 0; i < np; ++i) {
+              ASSERT_EQ(std::bit_cast<std::uint32_t>(bloom_mean[i]),
+                        std::bit_cast<std::uint32_t>(want_bloom[i]))
+                  << "bloom at pixel " << i;
+            }
           }
         }
       }
     }
   }
-  EXPECT_EQ(bloomed, 24);  // every case with overflowing pixels bloomed
+  EXPECT_EQ(bloomed, 48);  // every case with overflowing pixels bloomed, with and without a pool
   EXPECT_GT(compared, 60000);
 }
 
