@@ -1,6 +1,7 @@
 #include "sensor.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <mutex>
 
@@ -182,6 +183,7 @@ bool Saturate(std::vector<float> (&taps)[4], std::vector<float>& bloom_mean,
               bool shot_noise, RowPool* pool) {
   const std::size_t np = taps[0].size();
   const std::size_t w = static_cast<std::size_t>(width);
+  assert(np == w * static_cast<std::size_t>(height));  // every row is zeroed and scanned below
   const float fw = static_cast<float>(full_well);
   const float keep_share = static_cast<float>(overflow);
   const float out_share = static_cast<float>(bloom);

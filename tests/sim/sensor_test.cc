@@ -10,6 +10,7 @@
 #include <limits>
 #include <numeric>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "optics.h"
@@ -245,68 +246,75 @@ TEST(SensorTest, SaturationEqualsItsWholeImageDefinitionBitForBit) {
   // Overflowing pixels at the image's corners and edges, on both sides of the 64-pixel blocks the
   // overflow scan skips by, alone and in clusters; NaN and negative taps; blooming kernels from
   // radius 1 to wider than the image; with and without shot noise; on the calling thread and on a
-  // pool of two (rows in chunks, each with its own stream). Stale scratch (NaN) must not leak into
-  // the result.
-  const int w = 37, h = 23;  // 851 pixels: blocks of 64 end mid-row
-  const std::size_t np = static_cast<std::size_t>(w) * h;
-  const std::vector<std::vector<std::size_t>> hot = {
-      {0},
-      {np - 1},
-      {63, 64, 127, 128},
-      {w - 1, static_cast<std::size_t>(w) * (h - 1), 400, 401, 402, 400 + w},
-      {},
-  };
-  int compared = 0, bloomed = 0;
+  // pool of two (rows in chunks, each with its own stream). 37 x 23 for the edge cases, 640 x 64
+  // so that the pool's worker takes chunks of its own (four rows each). Stale scratch (NaN, and
+  // the previous case's bloom) must not leak into the result.
+  int compared = 0, bloomed = 0, cases = 0;
   RowPool two(2);
-  for (const double sigma : {0.3, 1.5, 9.0}) {
-    for (const bool shot : {false, true}) {
-      for (const auto& pixels : hot) {
-        for (RowPool* pool : {static_cast<RowPool*>(nullptr), &two}) {
-          std::vector<float> taps[4];
-          for (int k = 0; k < 4; ++k) {
-            taps[k].resize(np);
-            for (std::size_t i = 0; i < np; ++i) {
-              taps[k][i] =
-                  200.f + static_cast<float>((i * 13 + static_cast<std::size_t>(k) * 5) % 300);
+  for (const auto& [w, h] : {std::pair{37, 23}, std::pair{640, 64}}) {
+    const std::size_t np = static_cast<std::size_t>(w) * h;
+    const std::size_t sw = static_cast<std::size_t>(w);
+    const std::vector<std::vector<std::size_t>> hot = {
+        {0},
+        {np - 1},
+        {63, 64, 127, 128},
+        {sw - 1, sw * (h - 1), np / 2, np / 2 + 1, np / 2 + 2, np / 2 + sw},
+        {},
+    };
+    std::vector<float> bloom_mean(np, std::numeric_limits<float>::quiet_NaN());
+    std::vector<float> tmp(np, std::numeric_limits<float>::quiet_NaN());
+    const std::vector<double> sigmas =
+        w < 100 ? std::vector<double>{0.3, 1.5, 9.0} : std::vector<double>{1.5};
+    for (const double sigma : sigmas) {
+      for (const bool shot : {false, true}) {
+        for (const auto& pixels : hot) {
+          for (RowPool* pool : {static_cast<RowPool*>(nullptr), &two}) {
+            std::vector<float> taps[4];
+            for (int k = 0; k < 4; ++k) {
+              taps[k].resize(np);
+              for (std::size_t i = 0; i < np; ++i) {
+                taps[k][i] =
+                    200.f + static_cast<float>((i * 13 + static_cast<std::size_t>(k) * 5) % 300);
+              }
             }
-          }
-          taps[2][500] = std::numeric_limits<float>::quiet_NaN();
-          taps[3][501] = -40.f;
-          for (std::size_t p : pixels) {
-            taps[p % 4][p] = 1100.f + static_cast<float>(p % 7) * 300.f;  // above the full well
-            taps[(p + 1) % 4][p] = 980.f;
-          }
-          std::vector<float> want[4] = {taps[0], taps[1], taps[2], taps[3]};
-          std::vector<float> bloom_mean, want_bloom,
-              tmp(np, std::numeric_limits<float>::quiet_NaN());
-          const bool got_any =
-              Saturate(taps, bloom_mean, tmp, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot, pool);
-          const bool want_any =
-              SaturateByDefinition(want, want_bloom, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot);
-          ASSERT_EQ(got_any, want_any) << "sigma " << sigma;
-          bloomed += got_any;
-          for (int k = 0; k < 4; ++k) {
-            for (std::size_t i = 0; i < np; ++i) {
-              ASSERT_EQ(std::bit_cast<std::uint32_t>(taps[k][i]),
-                        std::bit_cast<std::uint32_t>(want[k][i]))
-                  << "sigma " << sigma << " shot " << shot << " pool " << (pool != nullptr)
-                  << " tap " << k << " pixel " << i;
-              ++compared;
+            taps[2][np / 2 + 100] = std::numeric_limits<float>::quiet_NaN();
+            taps[3][np / 2 + 101] = -40.f;
+            for (std::size_t p : pixels) {
+              taps[p % 4][p] = 1100.f + static_cast<float>(p % 7) * 300.f;  // above the full well
+              taps[(p + 1) % 4][p] = 980.f;
             }
-          }
-          if (got_any) {
+            std::vector<float> want[4] = {taps[0], taps[1], taps[2], taps[3]};
+            std::vector<float> want_bloom;
+            const bool got_any =
+                Saturate(taps, bloom_mean, tmp, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot, pool);
+            const bool want_any =
+                SaturateByDefinition(want, want_bloom, w, h, sigma, 1000.0, 0.6, 0.3, 77, shot);
+            ASSERT_EQ(got_any, want_any) << w << " x " << h << " sigma " << sigma;
+            ++cases;
+            bloomed += got_any;
+            for (int k = 0; k < 4; ++k) {
+              for (std::size_t i = 0; i < np; ++i) {
+                ASSERT_EQ(std::bit_cast<std::uint32_t>(taps[k][i]),
+                          std::bit_cast<std::uint32_t>(want[k][i]))
+                    << w << " x " << h << " sigma " << sigma << " shot " << shot << " pool "
+                    << (pool != nullptr) << " tap " << k << " pixel " << i;
+                ++compared;
+              }
+            }
+            // The bloom image: the definition's, or all zeros when nothing spilled.
             for (std::size_t i = 0; i < np; ++i) {
               ASSERT_EQ(std::bit_cast<std::uint32_t>(bloom_mean[i]),
-                        std::bit_cast<std::uint32_t>(want_bloom[i]))
-                  << "bloom at pixel " << i;
+                        std::bit_cast<std::uint32_t>(got_any ? want_bloom[i] : 0.f))
+                  << w << " x " << h << " bloom at pixel " << i;
             }
           }
         }
       }
     }
   }
-  EXPECT_EQ(bloomed, 48);  // every case with overflowing pixels bloomed, with and without a pool
-  EXPECT_GT(compared, 60000);
+  EXPECT_EQ(cases, 80);
+  EXPECT_EQ(bloomed, 64);  // every case with overflowing pixels bloomed, with and without a pool
+  EXPECT_GT(compared, 2000000);
 }
 
 }  // namespace

@@ -111,6 +111,19 @@ std::vector<Case> Cases() {
        2,
        {0xd3e7f58d9bc5d1abull, 0x658e6ef3ec5c4a2dull},
        Bit(Flag::kSaturated)},
+      // The same frames on two threads (no golden values of its own: frames must not depend on
+      // the thread count; saturation and blooming run on the row pool, 2026-11-27).
+      {"hand_saturated_bloom_2threads",
+       "hand",
+       "sr2",
+       [](SimulatorOptions& o) {
+         o.seed = 11;
+         o.threads = 2;
+       },
+       59,
+       2,
+       {0xd3e7f58d9bc5d1abull, 0x658e6ef3ec5c4a2dull},
+       Bit(Flag::kSaturated)},
       {"hand_seed7",
        "hand",
        "sr2",
@@ -243,6 +256,9 @@ std::vector<IsaGolden> OtherIsas() {
        {0xec83efeb78c580eaull, 0x7d7d9869e1f395d4ull},
        {0x779f64452be5fb0bull, 0xbf0e13a3cea266d9ull}},
       {"hand_saturated_bloom",
+       {0x5e9925f62c3c1623ull, 0x933df3ffd01a348full},
+       {0xbad2e35186305a5aull, 0xa9ae12cf1b31dd88ull}},
+      {"hand_saturated_bloom_2threads",
        {0x5e9925f62c3c1623ull, 0x933df3ffd01a348full},
        {0xbad2e35186305a5aull, 0xa9ae12cf1b31dd88ull}},
       {"hand_seed7",
