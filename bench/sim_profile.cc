@@ -2,17 +2,20 @@
 //   valgrind --tool=callgrind --toggle-collect='tofcam::sim::SimulatedCamera::Grab()'
 //     build/bench/sim_profile moving 20 1   (one command line)
 // A fourth argument `shortcut` switches the planar shortcut on.
-// Cases: moving | pan | static | generic640 | demo (the scenes of sim_bench.cc). The first frame
-// is grabbed before the measured ones so one-time work (Embree BVH build) can be excluded by
-// comparing runs with different frame counts; it also prints Grab()'s own time a frame after the
-// first. Instruction counts do not depend on machine load, unlike the wall times of sim_bench.
+// Cases: moving | pan | static | generic640 | demo (the scenes of sim_bench.cc). One-time work
+// (Embree BVH build, caches) happens in the first frame: compare runs with different frame
+// counts to exclude it. The program also prints Grab()'s own time a frame over the frames after
+// the first. Instruction counts do not depend on machine load, unlike the wall times of
+// sim_bench.
 #include <algorithm>
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <numeric>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sim_scenes.h"
@@ -76,9 +79,10 @@ int main(int argc, char** argv) {
     std::vector<double> later(grab_ms.begin() + 1, grab_ms.end());
     const double sum = std::accumulate(later.begin(), later.end(), 0.0);
     std::sort(later.begin(), later.end());
+    const std::size_t n = later.size();
+    const double median = n % 2 == 1 ? later[n / 2] : 0.5 * (later[n / 2 - 1] + later[n / 2]);
     std::printf("Grab(), frames 2-%d: mean %.3f ms, median %.3f ms (%.1f frames/s)\n", frames,
-                sum / static_cast<double>(later.size()), later[later.size() / 2],
-                1e3 * static_cast<double>(later.size()) / sum);
+                sum / static_cast<double>(n), median, 1e3 * static_cast<double>(n) / sum);
   }
   return 0;
 }
