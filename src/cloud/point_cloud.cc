@@ -11,9 +11,15 @@
 #include <emmintrin.h>
 #endif
 
+#include "../core/avx512_forms.h"
 #include "../filters/hot_loop.h"
 #include "../pipeline/stage_kernels.h"
 #include "tofcam/core/error.h"
+
+// The 64-byte streaming stores (StreamBytes64): see src/core/avx512_forms.h.
+#if defined(TOFCAM_AVX512_FORMS)
+#include <immintrin.h>
+#endif
 
 namespace tofcam {
 namespace {
@@ -65,14 +71,42 @@ TOFCAM_HOT_LOOP void Project(std::size_t n, const float* __restrict d,
   }
 }
 
-// n bytes from src to dst, 64-byte blocks from dst's first 16-byte boundary on with
-// non-temporal stores (SSE2, so every x86-64 CPU; elsewhere a plain copy). The caller fences.
-// Starting at the first whole cache line instead (a large vector's data is 16 bytes past a page
-// boundary) was measured no faster (two batches of interleaved pipeline_bench runs, one slower,
-// one the same).
+#if defined(TOFCAM_AVX512_FORMS)
+// StreamBytes on AVX-512 CPUs: one 64-byte non-temporal store per cache line, from dst's first
+// line boundary on, instead of four 16-byte ones, so that no line leaves the write-combining
+// buffer part-written. A stand-alone loop on the Zen 5 test machine (seven destinations written
+// in 64 KB pieces from an L2-resident source, as the fused pass writes the cloud), in one run:
+// with 16 MiB a destination (past a Zen 5 core complex's 32 MiB L3, as a 1 MP cloud is) 64-byte
+// stores wrote 35.7-37.8 GB/s, 16-byte ones 17.0-26.6 GB/s and plain stores (memcpy) 20.6-23.9
+// GB/s; with 4 MiB (within the L3) 34-36, 24-29 and 40-47 GB/s. The 1 MP chain and cloud:
+// docs/benchmarks.md.
+TOFCAM_AVX512_DIAGNOSTICS_BEGIN
+TOFCAM_AVX512_TARGET void StreamBytes64(const unsigned char* src, unsigned char* dst,
+                                        std::size_t n) {
+  std::size_t i = std::min(n, (64 - reinterpret_cast<std::uintptr_t>(dst) % 64) % 64);
+  std::memcpy(dst, src, i);
+  for (; i + 64 <= n; i += 64) {
+    _mm512_stream_si512(reinterpret_cast<__m512i*>(dst + i), _mm512_loadu_si512(src + i));
+  }
+  std::memcpy(dst + i, src + i, n - i);
+}
+TOFCAM_AVX512_DIAGNOSTICS_END
+#endif
+
+// n bytes from src to dst with non-temporal stores: on AVX-512 CPUs StreamBytes64, else 64-byte
+// blocks from dst's first 16-byte boundary on in four 16-byte stores (SSE2, so every x86-64 CPU;
+// elsewhere a plain copy). The caller fences. Starting the 16-byte form at the first whole cache
+// line instead (a large vector's data is 16 bytes past a page boundary) was measured no faster
+// (two batches of interleaved pipeline_bench runs, one slower, one the same).
 void StreamBytes(const void* src_v, void* dst_v, std::size_t n) {
   const auto* src = static_cast<const unsigned char*>(src_v);
   auto* dst = static_cast<unsigned char*>(dst_v);
+#if defined(TOFCAM_AVX512_FORMS)
+  if (internal::UseAvx512Forms()) {
+    StreamBytes64(src, dst, n);
+    return;
+  }
+#endif
   std::size_t i = 0;
 #if defined(__SSE2__)
   i = std::min(n, (16 - reinterpret_cast<std::uintptr_t>(dst) % 16) % 16);

@@ -6,8 +6,10 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <string>
 #include <vector>
 
+#include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "pipeline/stage_kernels.h"
 #include "tofcam/core/error.h"
 
@@ -135,7 +137,11 @@ TEST(PointCloudTest, IntoReusedCloudEqualsFreshCloud) {
 // channels copied, NaN / clear flags for missing ones. Checked against that per point, over two
 // calls into one cloud; then the same cloud written span by span from odd starting points (as
 // the fused pass writes it chunk by chunk), so that the streamed lines start at every alignment.
-TEST(PointCloudTest, LargeCloudIsStreamedWithTheSameValues) {
+// Both store forms (64-byte on AVX-512 CPUs, 16-byte elsewhere) where the CPU has both.
+class LargeCloudTest : public ::testing::TestWithParam<bool> {};
+
+TEST_P(LargeCloudTest, IsStreamedWithTheSameValues) {
+  const internal::PortableFormsForTesting portable(GetParam());
   const std::size_t points = kernels::kStreamCloudBytes / kernels::kCloudBytesPerPoint + 1;
   CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
   k.width = 1021;
@@ -215,6 +221,11 @@ TEST(PointCloudTest, LargeCloudIsStreamedWithTheSameValues) {
     EXPECT_TRUE(spans.flags == cloud.flags);
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(StoreForms, LargeCloudTest, ::testing::Bool(),
+                         [](const ::testing::TestParamInfo<bool>& param) {
+                           return param.param ? std::string("Portable") : std::string("Native");
+                         });
 
 TEST(PointCloudTest, ErrorsAreReported) {
   const CameraIntrinsics k = CameraIntrinsics::SwissRangerSr2();
