@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "exp_non_positive.h"
 #include "hot_loop.h"
 #include "simd.h"
 #include "tofcam/core/error.h"
@@ -95,6 +96,59 @@ TOFCAM_HOT_LOOP int MedianRow(int w, float limit, int min_support, const float* 
   return col;
 }
 
+// One neighbour offset of the bilateral for n pixels of a row: `u` the usable distances (NaN
+// elsewhere) of the centres, `un` of their neighbours at the offset, `g` the centres'
+// 1 / (2 (k σ)²), `inv_s2n` the neighbours' 1 / σ². A neighbour within `limit` of its centre
+// (single precision, false for NaN) adds its weight e^(-Δ² g) / σ_n² to `weight_sum`, weight x
+// distance to `weighted`, and 1 to `count`. Passes over the offsets in the window's row-major
+// order sum in the per-pixel definition's order.
+TOFCAM_HOT_LOOP_WIDE void BilateralOffset(int n, float limit, const float* __restrict u,
+                                          const float* __restrict un, const double* __restrict g,
+                                          const double* __restrict inv_s2n,
+                                          double* __restrict weight_sum,
+                                          double* __restrict weighted,
+                                          std::int32_t* __restrict count) {
+  for (int c = 0; c < n; ++c) {
+    const float fc = u[c], fn = un[c];
+    const bool in = std::abs(fn - fc) <= limit;
+    const double dc = fc, dn = fn;
+    const double wgt = filters_internal::ExpNonPositive(-(dn - dc) * (dn - dc) * g[c]) * inv_s2n[c];
+    weight_sum[c] += in ? wgt : 0.0;
+    weighted[c] += in ? wgt * dn : 0.0;
+    count[c] += in ? 1 : 0;
+  }
+}
+
+// The bilateral's per-pixel factors: 1 / σ² and 1 / (2 (k σ)²), σ = ΔL where finite and
+// positive, else `fallback` (`s` null: no ΔL).
+TOFCAM_HOT_LOOP_WIDE void BilateralFactors(std::size_t n, const float* __restrict s, double k,
+                                           double fallback, double* __restrict inv_s2,
+                                           double* __restrict g) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float si = s == nullptr ? 0.0f : s[i];
+    const double sigma = (std::abs(si) < kInf) & (si > 0.0f) ? static_cast<double>(si) : fallback;
+    inv_s2[i] = 1.0 / (sigma * sigma);
+    const double ks = k * sigma;
+    g[i] = 1.0 / (2.0 * (ks * ks));
+  }
+}
+
+// The bilateral's result for one row: the weighted mean where the centre is usable and its
+// support has at least min_support pixels; `out` kept elsewhere.
+TOFCAM_HOT_LOOP_WIDE void BilateralFinish(int w, int min_support, const float* __restrict u,
+                                          const double* __restrict weight_sum,
+                                          const double* __restrict weighted,
+                                          const std::int32_t* __restrict count,
+                                          float* __restrict out) {
+  for (int c = 0; c < w; ++c) {
+    // A usable centre is in its own support, so its weight sum is positive.
+    const bool apply = (u[c] == u[c]) & (count[c] >= min_support);
+    const float mean = static_cast<float>(weighted[c] / weight_sum[c]);
+    out[c] = apply ? mean : out[c];
+  }
+}
+
 }  // namespace
 
 std::string_view SpatialFilterKindName(SpatialFilterKind kind) noexcept {
@@ -148,23 +202,54 @@ void SpatialFilterInto(const MetricFrame& frame, const SpatialFilterOptions& opt
   const double limit =
       options.max_jump_m > 0.0 ? options.max_jump_m : std::numeric_limits<double>::infinity();
   const bool has_sigma = !frame.delta_l_m.empty();
-  const auto sigma_at = [&](std::size_t i) {
-    const double s = has_sigma ? frame.delta_l_m[i] : 0.0;
-    return std::isfinite(s) && s > 0.0 ? s : options.fallback_sigma_m;
-  };
   // Usable distances, NaN elsewhere: one test per neighbour in the loops below.
   thread_local std::vector<float> usable;
   usable.resize(d.size());
   for (std::size_t i = 0; i < d.size(); ++i) {
     usable[i] = Usable(frame, i) ? d[i] : std::numeric_limits<float>::quiet_NaN();
   }
-  std::array<float, 49> support{};
-  // The support test in single precision, |d_n - d| <= limit, in both paths.
+  // The support test in single precision, |d_n - d| <= limit, in both kinds.
   const float flimit = static_cast<float>(limit);
+  if (options.kind == SpatialFilterKind::kBilateral) {
+    // Per pixel 1 / σ² and 1 / (2 (k σ)²), then one vectorised pass per offset of the window
+    // over each row's columns (BilateralOffset), in the window's order.
+    thread_local std::vector<double> inv_s2, g, weight_sum, weighted;
+    thread_local std::vector<std::int32_t> count;
+    inv_s2.resize(d.size());
+    g.resize(d.size());
+    BilateralFactors(d.size(), has_sigma ? frame.delta_l_m.data() : nullptr,
+                     options.range_sigma_factor, options.fallback_sigma_m, inv_s2.data(), g.data());
+    weight_sum.resize(static_cast<std::size_t>(w));
+    weighted.resize(static_cast<std::size_t>(w));
+    count.resize(static_cast<std::size_t>(w));
+    for (int row = 0; row < h; ++row) {
+      std::fill(weight_sum.begin(), weight_sum.end(), 0.0);
+      std::fill(weighted.begin(), weighted.end(), 0.0);
+      std::fill(count.begin(), count.end(), 0);
+      const std::size_t c0 = static_cast<std::size_t>(row) * w;
+      for (int y = std::max(0, row - r); y <= std::min(h - 1, row + r); ++y) {
+        for (int dx = -r; dx <= r; ++dx) {
+          // Columns [first, last) have their neighbour at dx in the image.
+          const int first = std::max(0, -dx), last = std::min(w, w - dx);
+          if (first >= last) continue;
+          const std::size_t at = c0 + static_cast<std::size_t>(first);
+          const std::size_t n_at = static_cast<std::size_t>(y) * w +
+                                   static_cast<std::size_t>(first + dx);  // first >= -dx
+          BilateralOffset(last - first, flimit, usable.data() + at, usable.data() + n_at,
+                          g.data() + at, inv_s2.data() + n_at, weight_sum.data() + first,
+                          weighted.data() + first, count.data() + first);
+        }
+      }
+      BilateralFinish(w, options.min_support, usable.data() + c0, weight_sum.data(),
+                      weighted.data(), count.data(), distance_out.data() + c0);
+    }
+    return;
+  }
+  std::array<float, 49> support{};
   for (int row = 0; row < h; ++row) {
     // Columns [1, vector_end) of an interior row are done by MedianRow (3x3 median only).
     int vector_end = 1;
-    if (options.kind == SpatialFilterKind::kMedian && r == 1 && row > 0 && row + 1 < h) {
+    if (r == 1 && row > 0 && row + 1 < h) {
       const std::size_t c0 = static_cast<std::size_t>(row) * w;
       vector_end =
           MedianRow(w, flimit, options.min_support, usable.data() + c0, distance_out.data() + c0);
@@ -175,35 +260,18 @@ void SpatialFilterInto(const MetricFrame& frame, const SpatialFilterOptions& opt
       const std::size_t c = static_cast<std::size_t>(row) * w + col;
       const float fc = usable[c];
       if (!(fc == fc)) continue;  // NaN: not usable
-      const double dc = fc;
-      const double sc = sigma_at(c);
-      const double inv_two_range2 = 1.0 / (2.0 * std::pow(options.range_sigma_factor * sc, 2));
       int n = 0;
-      double weight_sum = 0.0, weighted = 0.0;
       for (int y = std::max(0, row - r); y <= std::min(h - 1, row + r); ++y) {
         for (int x = std::max(0, col - r); x <= std::min(w - 1, col + r); ++x) {
-          const std::size_t i = static_cast<std::size_t>(y) * w + x;
-          const float un = usable[i];
-          if (!(un == un)) continue;
-          if (!(std::abs(un - fc) <= flimit)) continue;
-          const double dn = un;
-          support[static_cast<std::size_t>(n++)] = static_cast<float>(dn);
-          if (options.kind == SpatialFilterKind::kBilateral) {
-            const double sn = sigma_at(i);
-            const double wgt = std::exp(-(dn - dc) * (dn - dc) * inv_two_range2) / (sn * sn);
-            weight_sum += wgt;
-            weighted += wgt * dn;
-          }
+          const float un = usable[static_cast<std::size_t>(y) * w + x];
+          if (!(std::abs(un - fc) <= flimit)) continue;  // also NaN: not usable
+          support[static_cast<std::size_t>(n++)] = un;
         }
       }
       if (n < options.min_support) continue;
-      if (options.kind == SpatialFilterKind::kMedian) {
-        auto* mid = support.begin() + (n - 1) / 2;
-        std::nth_element(support.begin(), mid, support.begin() + n);
-        distance_out[c] = *mid;
-      } else {
-        distance_out[c] = static_cast<float>(weighted / weight_sum);
-      }
+      auto* mid = support.begin() + (n - 1) / 2;
+      std::nth_element(support.begin(), mid, support.begin() + n);
+      distance_out[c] = *mid;
     }
   }
 }

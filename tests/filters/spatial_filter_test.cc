@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -180,6 +181,100 @@ TEST(SpatialFilterTest, MedianEqualsTheSortedSupportForEverySizeAndPattern) {
     }
   }
   EXPECT_GT(smoothed, checked / 10);  // the frames exercise the median, not only copies
+}
+
+// The bilateral by its definition, pixel by pixel, in double precision with std::exp and a
+// division by σ_n² (the form the filter had before its offset passes were vectorised): the
+// support is every usable pixel of the (2 r + 1)² window within max_jump_m of the centre
+// (single precision), each weighted exp(-(d_n - d)² / (2 (k σ)²)) / σ_n², σ = ΔL where finite
+// and positive, else fallback_sigma_m. The filter computes e^x with its own polynomial and
+// multiplies by 1 / σ_n², so its weights may differ from these by a few units in the last place
+// of a double (1e-15 relative); the mean, rounded to float, can then differ only where it lies
+// within that of a float rounding boundary: by one float ulp at most. Every size, radius, window
+// position and support pattern below must agree to that; σ from 0.5 mm to 20 cm against steps
+// of up to 0.5 m puts the exponent anywhere from 0 to beyond e^-700 (a zero weight).
+TEST(SpatialFilterTest, BilateralEqualsItsDefinitionForEverySizeAndPattern) {
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  long long checked = 0, smoothed = 0, exact = 0;
+  for (const auto& [w, h] : std::vector<std::pair<int, int>>{
+           {1, 1}, {2, 5}, {3, 3}, {9, 4}, {17, 6}, {31, 7}, {160, 12}}) {
+    for (int radius = 1; radius <= 3; ++radius) {
+      for (const auto& [jump, min_support] :
+           std::vector<std::pair<double, int>>{{0.1, 3}, {0.0, 1}, {0.25, 9}}) {
+        MetricFrame f = Frame(w, h, 0.0f);
+        f.delta_l_m = Image<float>(w, h);
+        for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+          const float surface = 1.0f + 0.5f * static_cast<float>(static_cast<int>(u(rng) * 3));
+          f.radial_distance_m[i] = surface + 0.05f * u(rng);
+          const float roll = u(rng);
+          if (roll < 0.04f) f.radial_distance_m[i] = std::numeric_limits<float>::quiet_NaN();
+          if (roll > 0.98f) f.radial_distance_m[i] = std::numeric_limits<float>::infinity();
+          if (roll > 0.04f && roll < 0.1f) f.flags[i] = PixelFlags(Flag::kSaturated);
+          // σ log-uniform in [0.5 mm, 20 cm]; some pixels without a usable ΔL (fallback).
+          f.delta_l_m[i] = 0.0005f * std::pow(400.0f, u(rng));
+          const float s_roll = u(rng);
+          if (s_roll < 0.03f) f.delta_l_m[i] = std::numeric_limits<float>::quiet_NaN();
+          if (s_roll > 0.97f) f.delta_l_m[i] = -0.01f;
+        }
+        SpatialFilterOptions o;
+        o.kind = SpatialFilterKind::kBilateral;
+        o.radius_px = radius;
+        o.max_jump_m = jump;
+        o.min_support = min_support;
+        const MetricFrame out = SpatialFilter(f, o);
+        const float limit =
+            jump > 0.0 ? static_cast<float>(jump) : std::numeric_limits<float>::infinity();
+        const auto usable = [&](int r, int c) {
+          return std::isfinite(f.radial_distance_m(r, c)) && f.flags(r, c).Valid();
+        };
+        const auto sigma = [&](int r, int c) {
+          const double s = f.delta_l_m(r, c);
+          return std::isfinite(s) && s > 0.0 ? s : o.fallback_sigma_m;
+        };
+        for (int r = 0; r < h; ++r) {
+          for (int c = 0; c < w; ++c) {
+            float expected = f.radial_distance_m(r, c);
+            if (usable(r, c)) {
+              const double dc = f.radial_distance_m(r, c);
+              const double ks = o.range_sigma_factor * sigma(r, c);
+              int n = 0;
+              double weight_sum = 0.0, weighted = 0.0;
+              for (int y = std::max(0, r - radius); y <= std::min(h - 1, r + radius); ++y) {
+                for (int x = std::max(0, c - radius); x <= std::min(w - 1, c + radius); ++x) {
+                  if (!usable(y, x) ||
+                      !(std::abs(f.radial_distance_m(y, x) - f.radial_distance_m(r, c)) <= limit)) {
+                    continue;
+                  }
+                  const double dn = f.radial_distance_m(y, x), sn = sigma(y, x);
+                  const double weight =
+                      std::exp(-(dn - dc) * (dn - dc) / (2.0 * ks * ks)) / (sn * sn);
+                  weight_sum += weight;
+                  weighted += weight * dn;
+                  ++n;
+                }
+              }
+              if (n >= min_support) {
+                expected = static_cast<float>(weighted / weight_sum);
+                ++smoothed;
+              }
+            }
+            const float got = out.radial_distance_m(r, c);
+            const bool same = std::memcmp(&got, &expected, sizeof got) == 0;
+            exact += same;
+            ASSERT_TRUE(same ||
+                        std::abs(got - expected) <= std::nextafter(expected, 1e30f) - expected)
+                << w << "x" << h << " r " << radius << " jump " << jump << " min " << min_support
+                << " at (" << r << ", " << c << "): " << got << " vs " << expected;
+            ++checked;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(smoothed, checked / 2);  // the frames exercise the weighted mean, not only copies
+  RecordProperty("bit_identical_permille", static_cast<int>(1000 * exact / checked));
+  std::printf("bilateral: %lld of %lld pixels bit for bit the definition's\n", exact, checked);
 }
 
 TEST(SpatialFilterTest, BadOptionsAndSizes) {
