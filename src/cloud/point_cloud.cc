@@ -74,12 +74,12 @@ TOFCAM_HOT_LOOP void Project(std::size_t n, const float* __restrict d,
 #if defined(TOFCAM_AVX512_FORMS)
 // StreamBytes on AVX-512 CPUs: one 64-byte non-temporal store per cache line, from dst's first
 // line boundary on, instead of four 16-byte ones, so that no line leaves the write-combining
-// buffer part-written. A stand-alone loop on the Zen 5 test machine (seven destinations written
-// in 64 KB pieces from an L2-resident source, as the fused pass writes the cloud), in one run:
-// with 16 MiB a destination (past a Zen 5 core complex's 32 MiB L3, as a 1 MP cloud is) 64-byte
-// stores wrote 35.7-37.8 GB/s, 16-byte ones 17.0-26.6 GB/s and plain stores (memcpy) 20.6-23.9
-// GB/s; with 4 MiB (within the L3) 34-36, 24-29 and 40-47 GB/s. The 1 MP chain and cloud:
-// docs/benchmarks.md.
+// buffer part-written. On the Zen 5 test machine, inside the 1 MP paper chain (a temporary
+// switch in one pipeline_bench binary, five alternated runs), the chain took 2.53-2.69x its
+// memcpy floor with these stores, 2.73-2.89x with 16-byte ones and 2.89-3.34x with plain stores
+// (a second A/B under heavier load was within the noise).
+// A cloud alone (26 MiB at 1 MP) fits in a 32 MiB L3, where plain stores write faster; in the
+// chain the frame's other 40 MB pass through the same cache. docs/benchmarks.md.
 TOFCAM_AVX512_DIAGNOSTICS_BEGIN
 TOFCAM_AVX512_TARGET void StreamBytes64(const unsigned char* src, unsigned char* dst,
                                         std::size_t n) {

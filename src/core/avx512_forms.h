@@ -48,14 +48,14 @@ extern std::atomic<bool> portable_forms_only;
   return has && !detail::portable_forms_only.load(std::memory_order_relaxed);
 }
 
-/// Tests only: with true, every stage with an AVX-512 form runs its portable loops even on an
-/// AVX-512 CPU, so a test can compare both forms on one machine. Process-wide; not meant to be
-/// flipped while another thread runs a stage (either form gives the same values, so a flip only
-/// changes which one runs).
+/// Tests and benchmarks only: with true, every stage with an AVX-512 form runs its portable loops
+/// even on an AVX-512 CPU, so a test can compare both forms on one machine. Process-wide; not meant
+/// to be flipped while another thread runs a stage (either form gives the same values, so a flip
+/// only changes which one runs).
 void UsePortableFormsForTesting(bool portable);
 
-/// Tests only: UsePortableFormsForTesting(portable) for the guard's lifetime, then back to the
-/// default, also when the code under test throws.
+/// Tests and benchmarks only: UsePortableFormsForTesting(portable) for the guard's lifetime, then
+/// back to the default, also when the code under test throws.
 class PortableFormsForTesting {
  public:
   explicit PortableFormsForTesting(bool portable) { UsePortableFormsForTesting(portable); }

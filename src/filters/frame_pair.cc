@@ -129,17 +129,10 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
   const bool amplitudes = amplitude_scale > 0.0 && previous.amplitude.SameSize(w, h) &&
                           current.amplitude.SameSize(w, h);
   const std::size_t n = current.radial_distance_m.size();
-  // ln(A2 / A1) per pixel where both amplitudes are positive (0 elsewhere), computed once for the
-  // median and the per-pixel checks below (std::log is a library call per value; twice per pixel
-  // it was a fifth of the combination's time).
+  // ln(A2 / A1) of each pixel good in both frames with both amplitudes positive (0 elsewhere:
+  // no check reads it), computed once for the median and the per-pixel checks below. std::log is
+  // a library call per value; twice per pixel it was a fifth of the combination's time.
   thread_local std::vector<double> log_ratios;
-  if (amplitudes) {
-    log_ratios.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      const double a1 = previous.amplitude[i] * amplitude_scale, a2 = current.amplitude[i];
-      log_ratios[i] = a1 > 0.0 && a2 > 0.0 ? std::log(a2 / a1) : 0.0;
-    }
-  }
   // Two frequencies: the pair's median log amplitude ratio (per µs) over the pixels good in
   // both (at least kMinPixelsForMedian of them), the reference the per-pixel amplitude check
   // compares with (the demodulation contrast, and so the amplitude per µs, differs by frequency on
@@ -147,20 +140,21 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
   const bool two_returns_check =
       dual && amplitudes && options.max_amplitude_disagreement_sigma > 0.0;
   double median_log_ratio = 0.0;
-  if (two_returns_check) {
+  if (amplitudes) {
     thread_local std::vector<double> logs;
     logs.clear();
+    log_ratios.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       const double a1 = previous.amplitude[i] * amplitude_scale, a2 = current.amplitude[i];
-      // Finite only: nth_element needs an order (two infinite amplitudes give NaN).
-      if (Good(previous, i) && Good(current, i) && a1 > 0.0 && a2 > 0.0 &&
-          std::isfinite(log_ratios[i])) {
-        logs.push_back(log_ratios[i]);
-      }
+      const bool both = Good(previous, i) && Good(current, i) && a1 > 0.0 && a2 > 0.0;
+      log_ratios[i] = both ? std::log(a2 / a1) : 0.0;
+      // NaN (two infinite amplitudes) left out: nth_element needs an order.
+      if (two_returns_check && both && !std::isnan(log_ratios[i])) logs.push_back(log_ratios[i]);
     }
     // Too few pixels to tell the camera's ratio from the scene's: equal contrast assumed.
-    if (logs.size() >= kMinPixelsForMedian)
+    if (logs.size() >= kMinPixelsForMedian) {
       median_log_ratio = filters_internal::KthSmallest(logs, logs.size() / 2);
+    }
   }
   const double log_floor = std::log1p(options.min_amplitude_tolerance);
   // Within half the wrap separation a motion's own pair is the only one that close.

@@ -23,7 +23,7 @@ inline double KthSmallest(std::vector<double>& v, std::size_t k) {
     sample.resize(kSample);
     const std::size_t step = n / kSample;
     for (std::size_t i = 0; i < kSample; ++i) sample[i] = v[i * step];
-    const std::size_t at = k * kSample / n;
+    const std::size_t at = std::min(kSample - 1, k / step);  // k's rank in the sample
     const std::size_t lo_rank = at > kMargin ? at - kMargin : 0;
     const std::size_t hi_rank = std::min(kSample - 1, at + kMargin);
     std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(lo_rank),

@@ -121,9 +121,9 @@ TOFCAM_HOT_LOOP_WIDE void BilateralOffset(int n, float limit, const float* __res
 
 // The bilateral's per-pixel factors: 1 / σ² and 1 / (2 (k σ)²), σ = ΔL where finite and
 // positive, else `fallback` (`s` null: no ΔL).
-TOFCAM_HOT_LOOP_WIDE void BilateralFactors(std::size_t n, const float* __restrict s, double k,
-                                           double fallback, double* __restrict inv_s2,
-                                           double* __restrict g) {
+TOFCAM_HOT_LOOP void BilateralFactors(std::size_t n, const float* __restrict s, double k,
+                                      double fallback, double* __restrict inv_s2,
+                                      double* __restrict g) {
   constexpr float kInf = std::numeric_limits<float>::infinity();
   for (std::size_t i = 0; i < n; ++i) {
     const float si = s == nullptr ? 0.0f : s[i];
@@ -136,11 +136,10 @@ TOFCAM_HOT_LOOP_WIDE void BilateralFactors(std::size_t n, const float* __restric
 
 // The bilateral's result for one row: the weighted mean where the centre is usable and its
 // support has at least min_support pixels; `out` kept elsewhere.
-TOFCAM_HOT_LOOP_WIDE void BilateralFinish(int w, int min_support, const float* __restrict u,
-                                          const double* __restrict weight_sum,
-                                          const double* __restrict weighted,
-                                          const std::int32_t* __restrict count,
-                                          float* __restrict out) {
+TOFCAM_HOT_LOOP void BilateralFinish(int w, int min_support, const float* __restrict u,
+                                     const double* __restrict weight_sum,
+                                     const double* __restrict weighted,
+                                     const std::int32_t* __restrict count, float* __restrict out) {
   for (int c = 0; c < w; ++c) {
     // A usable centre is in its own support, so its weight sum is positive.
     const bool apply = (u[c] == u[c]) & (count[c] >= min_support);

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
@@ -231,6 +232,21 @@ TEST(FramePair, AmplitudesThatDifferByFrequencyMeanTwoReturns) {
   d.info.integration_time_register = 20;
   CombineFramePair(a, d);
   EXPECT_FALSE(d.flags[80].Any(kRejectMask));
+}
+
+// Pixels whose amplitude is infinite in both frames have no amplitude ratio (inf / inf is NaN):
+// they stay out of the pair's median, which the other 70 single surfaces still set to their
+// ratio 0.9, so the surfaces pass and the mixed pixel is flagged as above.
+TEST(FramePair, InfiniteAmplitudesStayOutOfTheMedian) {
+  MetricFrame a = MixedRow(20e6, 1.0);
+  MetricFrame b = MixedRow(17e6, 0.9);
+  for (int i = 0; i < 10; ++i) {
+    a.amplitude[i] = std::numeric_limits<float>::infinity();
+    b.amplitude[i] = std::numeric_limits<float>::infinity();
+  }
+  CombineFramePair(a, b);
+  for (int i = 10; i < 80; ++i) EXPECT_FALSE(b.flags[i].Any(kRejectMask)) << i;
+  EXPECT_TRUE(b.flags[80].Has(Flag::kInconsistent));
 }
 
 TEST(FramePair, HdrTakesTheOtherExposureWhereOneClippedAndWeightsBySigma) {

@@ -1,4 +1,4 @@
-#include "kth_smallest.h"
+#include "filters/kth_smallest.h"
 
 #include <gtest/gtest.h>
 
