@@ -7,6 +7,7 @@
 #include <string>
 
 #include "bench_common.h"
+#include "tofcam/filters/denoise.h"
 #include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/frame_pair.h"
 #include "tofcam/filters/spatial_filter.h"
@@ -143,6 +144,19 @@ void BM_SmoothingBilateral(benchmark::State& s) {
   RunSmoothing(s, tofcam::SpatialFilterKind::kBilateral);
 }
 BENCHMARK(BM_SmoothingBilateral)->Apply(Resolutions);
+
+// Denoising before the pair (tofcam/filters/denoise.h), its defaults, into reused channels.
+void BM_Denoise(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  tofcam::DenoisedChannels out;
+  std::size_t i = 0;
+  for (auto _ : state) {
+    tofcam::DenoiseInto(in.ready[i++ % in.ready.size()], {}, out);
+    benchmark::DoNotOptimize(out.radial_distance_m.data());
+  }
+  tofcam::bench::SetPixels(state);
+}
+BENCHMARK(BM_Denoise)->Apply(Resolutions);
 
 void BM_Uncertainty(benchmark::State& state) {
   const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);

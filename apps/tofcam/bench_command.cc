@@ -36,6 +36,7 @@
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 #include "tofcam/core/units.h"
+#include "tofcam/filters/denoise.h"
 #include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/frame_pair.h"
 #include "tofcam/filters/spatial_filter.h"
@@ -178,8 +179,9 @@ struct Workspace {
   Image<PixelFlags> raised;  // filter output, reused (FilterSet::Process, ApplyFiltersInto)
   // One prepared filter set per filter row (key: the row's filter name), built for the rays.
   std::map<std::string, FilterSet> filter_sets;
-  PanView pan_view;       // reused (MakePanViewInto), as a per-sweep loop does
-  Image<float> smoothed;  // SpatialFilterInto output
+  PanView pan_view;           // reused (MakePanViewInto), as a per-sweep loop does
+  Image<float> smoothed;      // SpatialFilterInto output
+  DenoisedChannels denoised;  // DenoiseInto output
   MetricFrame temporal_frame;
   std::optional<TemporalFilter> temporal;
   PointCloud cloud;
@@ -416,6 +418,13 @@ std::vector<Stage> MakeStages() {
   }
   // Dual-frequency unwrapping of a frame with its predecessor: the current frame's distance,
   // ΔL and flags are restored (4 + 4 + 2 both ways) and both frames' read.
+  // Denoising before the pair (not in the paper): distance, amplitude, ΔL and flags in,
+  // distance, amplitude and ΔL out.
+  s.push_back({"denoise 3x3 (before the pair)", 4 + 4 + 4 + 2 + 12, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 DenoiseInto(ws.ready[i % ws.ready.size()], {}, ws.denoised);
+                 Sink(ws, ws.denoised.radial_distance_m.data());
+               }});
   s.push_back({"frame pair (dual-frequency unwrap)", 10 + 10 + 10 + 10, 1, true,
                [](Workspace& ws, std::size_t i) {
                  const MetricFrame& in = ws.pair_17[i % ws.pair_17.size()];

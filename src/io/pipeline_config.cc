@@ -121,6 +121,15 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("unknown_neighbour_flags", FlagMask{o.uncertainty.unknown_neighbour_flags},
             "a pixel next to one with any of these flags is flagged");
   });
+  v.Section("denoise",
+            "ΔL-weighted mean of each pixel's own surface before the pair and the neighbourhood "
+            "filters (not in the paper)",
+            [&] {
+              v.Field("enabled", o.denoise_enabled, "needs accuracy.enabled");
+              v.Field("radius_px", o.denoise.radius_px, "window half-size, [1, 3]");
+              v.Field("support_sigma", o.denoise.support_sigma,
+                      "neighbours within this many combined σ, (0, 100]");
+            });
   v.Section("smoothing", "edge-preserving spatial smoothing of kept distances (not in the paper)",
             [&] {
               v.Field("enabled", o.smoothing_enabled, "");

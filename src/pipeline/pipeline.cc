@@ -16,6 +16,25 @@
 namespace tofcam {
 using pipeline_internal::ValidateSection;
 
+namespace {
+
+// The accuracy threshold's kHighDeltaL judged again on the frame's current ΔL, in its flags and
+// in the filter flags (a stage after the fused pass changed ΔL).
+void JudgeDeltaLAgain(const AccuracyThresholdOptions& o, MetricFrame& m,
+                      Image<PixelFlags>& filter_flags) {
+  const auto high = static_cast<std::uint16_t>(Flag::kHighDeltaL);
+  const auto keep = static_cast<std::uint16_t>(~high);
+  const Image<PixelFlags> raised = AccuracyThresholdFilter(m, o);
+  for (std::size_t i = 0; i < raised.size(); ++i) {
+    m.flags[i] = PixelFlags(
+        static_cast<std::uint16_t>((m.flags[i].bits() & keep) | (raised[i].bits() & high)));
+    filter_flags[i] = PixelFlags(
+        static_cast<std::uint16_t>((filter_flags[i].bits() & keep) | (raised[i].bits() & high)));
+  }
+}
+
+}  // namespace
+
 void PipelineOptions::Validate() const {
   ValidateSection("metric_conversion", [&] { metric.Validate(); });
   ValidateSection("calibration", [&] {
@@ -38,6 +57,11 @@ void PipelineOptions::Validate() const {
   if (uncertainty_enabled && !accuracy_enabled) {
     throw Error(ErrorCode::kInvalidArgument,
                 "uncertainty.enabled needs accuracy.enabled (the uncertainty starts from ΔL)");
+  }
+  ValidateSection("denoise", [&] { denoise.Validate(); });
+  if (denoise_enabled && !accuracy_enabled) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "denoise.enabled needs accuracy.enabled (the weights are 1 / ΔL²)");
   }
   ValidateSection("smoothing", [&] { smoothing.Validate(); });
   ValidateSection("temporal", [&] { temporal.Validate(); });
@@ -182,9 +206,9 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   // A noise model with an edge term makes ΔL a neighbourhood quantity: finished after the pass.
   const bool edge_term = options_.accuracy_enabled && options_.accuracy.model.has_value() &&
                          options_.accuracy.model->uses_edges();
-  const bool late_cloud = edge_term || neighbourhood || confidence || options_.smoothing_enabled ||
-                          temporal_.has_value() || pair_.has_value() ||
-                          options_.uncertainty_enabled;
+  const bool late_cloud = edge_term || neighbourhood || confidence || options_.denoise_enabled ||
+                          options_.smoothing_enabled || temporal_.has_value() ||
+                          pair_.has_value() || options_.uncertainty_enabled;
   MetricFrame& m = result.frame;
   pipeline_internal::FusedStages s;
   s.metric = options_.metric;
@@ -212,18 +236,8 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   if (edge_term) {
     ApplyNoiseModelEdgeTerm(*options_.accuracy.model, m.radial_distance_m, result.input_flags,
                             m.delta_l_m);
-    if (filters.accuracy_enabled) {
-      // The pass judged ΔL without the edge term: judge again.
-      const std::uint16_t high = static_cast<std::uint16_t>(Flag::kHighDeltaL);
-      const Image<PixelFlags> raised = AccuracyThresholdFilter(m, filters.accuracy);
-      for (std::size_t i = 0; i < raised.size(); ++i) {
-        const auto keep = static_cast<std::uint16_t>(~high);
-        m.flags[i] = PixelFlags(
-            static_cast<std::uint16_t>((m.flags[i].bits() & keep) | (raised[i].bits() & high)));
-        result.filter_flags[i] = PixelFlags(static_cast<std::uint16_t>(
-            (result.filter_flags[i].bits() & keep) | (raised[i].bits() & high)));
-      }
-    }
+    // The pass judged ΔL without the edge term: judge again.
+    if (filters.accuracy_enabled) JudgeDeltaLAgain(filters.accuracy, m, result.filter_flags);
   }
   if (confidence) {
     // The vendor channel is read by few sources, so it stays out of the fused pass.
@@ -236,6 +250,15 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   const bool hdr_long = hdr && hdr_long_;
   if (hdr && !hdr_long) {
     hdr_base_register_ = controller_ ? controller_->Update(m) : m.info.integration_time_register;
+  }
+  // Denoising: before the pair (which then unwraps the means) and the neighbourhood filters.
+  if (options_.denoise_enabled) {
+    DenoiseInto(m, options_.denoise, denoised_);
+    std::swap(m.radial_distance_m, denoised_.radial_distance_m);
+    std::swap(m.delta_l_m, denoised_.delta_l_m);
+    if (!m.amplitude.empty()) std::swap(m.amplitude, denoised_.amplitude);
+    // A pixel rejected only for its single reading's ΔL is judged on its mean's.
+    if (filters.accuracy_enabled) JudgeDeltaLAgain(filters.accuracy, m, result.filter_flags);
   }
   // Dual-frequency unwrapping or the HDR merge: after the per-pixel filters (each frame's own ΔL
   // judged it), before the neighbourhood filters (which then see the combined distances).

@@ -76,6 +76,9 @@ void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.uncertainty.min_jump_sigma, b.uncertainty.min_jump_sigma);
   EXPECT_EQ(a.uncertainty.extrapolate_edges, b.uncertainty.extrapolate_edges);
   EXPECT_EQ(a.uncertainty.unknown_neighbour_flags, b.uncertainty.unknown_neighbour_flags);
+  EXPECT_EQ(a.denoise_enabled, b.denoise_enabled);
+  EXPECT_EQ(a.denoise.radius_px, b.denoise.radius_px);
+  EXPECT_EQ(a.denoise.support_sigma, b.denoise.support_sigma);
   EXPECT_EQ(a.smoothing_enabled, b.smoothing_enabled);
   EXPECT_EQ(a.smoothing.kind, b.smoothing.kind);
   EXPECT_EQ(a.smoothing.radius_px, b.smoothing.radius_px);
@@ -155,6 +158,9 @@ PipelineOptions Unusual() {
   o.uncertainty.min_jump_sigma = 2.5;
   o.uncertainty.extrapolate_edges = true;
   o.uncertainty.unknown_neighbour_flags = PixelFlags(Flag::kSaturated).bits();
+  o.denoise_enabled = true;
+  o.denoise.radius_px = 2;
+  o.denoise.support_sigma = 2.5;
   o.smoothing_enabled = true;
   o.smoothing.kind = SpatialFilterKind::kBilateral;
   o.smoothing.radius_px = 2;

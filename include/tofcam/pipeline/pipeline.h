@@ -29,6 +29,7 @@
 #include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/frame.h"
 #include "tofcam/core/rgb.h"
+#include "tofcam/filters/denoise.h"
 #include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/frame_pair.h"
 #include "tofcam/filters/spatial_filter.h"
@@ -65,6 +66,13 @@ struct PipelineOptions {
   AccuracyOptions accuracy;
 
   FilterSetOptions filters;
+
+  /// Denoising before the frame pair and the neighbourhood filters (tofcam/filters/denoise.h;
+  /// not in the paper): each usable pixel's distance and amplitude become the inverse-variance
+  /// weighted mean of its own surface's neighbours, its ΔL that mean's σ, and the accuracy
+  /// threshold judges the lowered ΔL again. Needs ΔL (accuracy.enabled). Off by default.
+  bool denoise_enabled = false;
+  DenoiseOptions denoise;
 
   /// The combined uncertainty (ΔL plus edges, tofcam/filters/uncertainty.h) with one threshold
   /// in metres, after the other filters: kLowConfidence. Needs ΔL. Off by default.
@@ -215,7 +223,8 @@ class Pipeline {
   std::unique_ptr<IntegrationTimeController> controller_;
   std::optional<TemporalFilter> temporal_;
   Image<float> smoothed_;
-  Frame compensated_;  // the scattering compensation's output, reused per frame
+  DenoisedChannels denoised_;  // the denoising's output, swapped into the frame
+  Frame compensated_;          // the scattering compensation's output, reused per frame
   std::optional<FramePairCombiner> pair_;
   // HDR: the register the controller chose at the last base exposure, and whether the frame
   // being processed is the long one.

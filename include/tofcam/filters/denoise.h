@@ -1,0 +1,60 @@
+#pragma once
+/// \file
+/// Noise reduction before anything judges a pixel by its noise (not in the paper): each usable
+/// pixel's distance and amplitude become the inverse-variance weighted mean over the pixels of
+/// its window that lie on its own surface, and its ΔL the σ of that mean. Run before the
+/// dual-frequency unwrapping it lets a pixel whose single reading is too noisy to choose its wrap
+/// count choose it from the mean, as Kinect-class pipelines filter their phasors before
+/// unwrapping (docs/beyond.md, "Denoising before the pair").
+///
+/// A pixel is usable when its distance is finite, its ΔL lies in [1e-9, 1e9] m, its amplitude
+/// (if the frame has one) is finite, and it carries no reject bit (kRejectMask) other than
+/// kHighDeltaL: a pixel rejected only for its noise is what this stage is for, and the caller
+/// judges ΔL again afterwards (the Pipeline does). Unusable pixels are copied unchanged and are
+/// nobody's support.
+///
+/// The support of a usable pixel with distance d and σ = ΔL is every usable pixel n of its
+/// (2 r + 1)^2 window (the pixel itself included) with (d_n - d)^2 <= k^2 (σ^2 + σ_n^2) in single
+/// precision, k = support_sigma: a neighbour whose reading differs from the centre's by more than
+/// k combined σ lies on another surface (a depth step, a wrap) and is left out. With weights
+/// w_n = 1 / σ_n^2:
+///   distance  d + Σ w_n (d_n - d) / Σ w_n   (the weighted mean, summed as deviations from d),
+///   amplitude Σ w_n A_n / Σ w_n,
+///   ΔL        (Σ w_n)^(-1/2), the σ of the weighted mean of independent readings.
+/// Sums are in single precision in the window's row-major order. Flags and intensity are copied.
+///
+/// Neighbouring outputs share readings, so their noise is correlated: a test that compares two
+/// neighbours' difference with their ΔL (jump edges, the uncertainty's edge term) sees smaller
+/// differences than independent readings with that ΔL would give, and is stricter, not laxer.
+/// On a plane the mean over a symmetric support is unbiased; on a curved surface, or at a step
+/// smaller than k combined σ, it blends within the noise.
+
+#include "tofcam/core/frame.h"
+
+namespace tofcam {
+
+struct DenoiseOptions {
+  int radius_px = 1;           ///< Window half-size: 1 = 3x3, 2 = 5x5; [1, 3].
+  double support_sigma = 3.0;  ///< k: support within k combined σ of the centre; (0, 100].
+  /// Throws Error(kInvalidArgument) naming the field.
+  void Validate() const;
+};
+
+/// The three channels DenoiseInto writes, each the frame's size (amplitude empty when the frame
+/// has none).
+struct DenoisedChannels {
+  Image<float> radial_distance_m;
+  Image<float> amplitude;
+  Image<float> delta_l_m;
+};
+
+/// The frame with denoised distance, amplitude and ΔL (see the file comment). Throws
+/// Error(kInvalidArgument) for invalid options, an empty distance or ΔL image, or channels of
+/// different sizes.
+[[nodiscard]] MetricFrame Denoise(const MetricFrame& frame, const DenoiseOptions& options);
+
+/// The denoised channels alone into `out` (resized when needed; a per-frame loop allocates nothing
+/// once sizes are stable): what the Pipeline uses. Throws like Denoise.
+void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, DenoisedChannels& out);
+
+}  // namespace tofcam

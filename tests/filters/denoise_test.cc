@@ -1,0 +1,301 @@
+#include "tofcam/filters/denoise.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "tofcam/core/error.h"
+
+namespace tofcam {
+namespace {
+
+// A w x h frame at `distance` with σ = `sigma` and amplitude 1000 everywhere.
+MetricFrame Flat(int w, int h, float distance, float sigma) {
+  MetricFrame f;
+  f.radial_distance_m = Image<float>(w, h, distance);
+  f.amplitude = Image<float>(w, h, 1000.0f);
+  f.delta_l_m = Image<float>(w, h, sigma);
+  f.flags = Image<PixelFlags>(w, h);
+  return f;
+}
+
+TEST(DenoiseTest, ACentreTakesTheInverseVarianceMeanOfItsWindow) {
+  // Hand-computed: eight pixels at 2.00 m with σ 2 cm (weight 2500 m^-2) and amplitude 1000,
+  // one at 2.03 m with σ 4 cm (weight 625) and amplitude 500. The centre's support is all nine
+  // (0.03 m is far inside 3 sqrt(0.02² + 0.04²) = 0.134 m): Σw = 20625,
+  // d = 2 + 625 x 0.03 / 20625, A = (20000 x 1000 + 625 x 500) / 20625, ΔL = 20625^-1/2.
+  MetricFrame f = Flat(3, 3, 2.0f, 0.02f);
+  f.radial_distance_m(0, 0) = 2.03f;
+  f.delta_l_m(0, 0) = 0.04f;
+  f.amplitude(0, 0) = 500.0f;
+  const MetricFrame out = Denoise(f, {});
+  // Float sums of nine terms: a few float ulps (2^-24 relative) each, here ≤ 1e-6.
+  EXPECT_NEAR(out.radial_distance_m(1, 1), 2.0 + 625.0 * 0.03 / 20625.0, 1e-6);
+  EXPECT_NEAR(out.amplitude(1, 1), (20000.0 * 1000.0 + 625.0 * 500.0) / 20625.0, 1e-3);
+  EXPECT_NEAR(out.delta_l_m(1, 1), 1.0 / std::sqrt(20625.0), 1e-8);
+  // The corner (0, 0) has four pixels in its window: itself (625) and three at 2.00 m (2500).
+  // Σw = 8125; as deviations from its own 2.03: d = 2.03 - 7500 x 0.03 / 8125.
+  EXPECT_NEAR(out.radial_distance_m(0, 0), 2.03 - 7500.0 * 0.03 / 8125.0, 1e-6);
+  EXPECT_NEAR(out.delta_l_m(0, 0), 1.0 / std::sqrt(8125.0), 1e-8);
+  // Intensity and flags are copied.
+  EXPECT_EQ(out.flags(1, 1).bits(), f.flags(1, 1).bits());
+}
+
+TEST(DenoiseTest, AStepOfMoreThanKCombinedSigmaIsNotMixed) {
+  // A near half (1 m) and a far half (3 m), σ 2 cm: 2 m is 70 combined σ. Every pixel's
+  // support is its own half, all at the same distance: the distance stays exactly, and ΔL is
+  // σ / sqrt(support): 6 pixels for a pixel on the step (not on the border rows), 9 inside.
+  MetricFrame f = Flat(6, 5, 3.0f, 0.02f);
+  for (int r = 0; r < 5; ++r) {
+    for (int c = 0; c < 3; ++c) f.radial_distance_m(r, c) = 1.0f;
+  }
+  const MetricFrame out = Denoise(f, {});
+  for (int r = 0; r < 5; ++r) {
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_EQ(out.radial_distance_m(r, c), f.radial_distance_m(r, c)) << r << " " << c;
+    }
+  }
+  EXPECT_NEAR(out.delta_l_m(2, 2), 0.02 / std::sqrt(6.0), 1e-8);
+  EXPECT_NEAR(out.delta_l_m(2, 3), 0.02 / std::sqrt(6.0), 1e-8);
+  EXPECT_NEAR(out.delta_l_m(2, 1), 0.02 / 3.0, 1e-8);
+  // A k whose support spans the step mixes the two halves.
+  DenoiseOptions wide;
+  wide.support_sigma = 100.0;  // 100 x 0.028 m = 2.8 m > 2 m
+  EXPECT_GT(Denoise(f, wide).radial_distance_m(2, 2), 1.5f);
+}
+
+TEST(DenoiseTest, RejectedPixelsAreNeitherChangedNorUsedExceptForTheirNoise) {
+  MetricFrame f = Flat(3, 3, 2.0f, 0.02f);
+  // A saturated neighbour 5 cm off: not support, and copied unchanged.
+  f.radial_distance_m(0, 0) = 2.05f;
+  f.amplitude(0, 0) = 123.0f;
+  f.flags(0, 0).Set(Flag::kSaturated);
+  // A neighbour rejected only for its ΔL, 3 cm off with σ 8 cm (weight 156.25): support.
+  f.radial_distance_m(0, 1) = 2.03f;
+  f.delta_l_m(0, 1) = 0.08f;
+  f.flags(0, 1).Set(Flag::kHighDeltaL);
+  const MetricFrame out = Denoise(f, {});
+  EXPECT_EQ(out.radial_distance_m(0, 0), 2.05f);
+  EXPECT_EQ(out.amplitude(0, 0), 123.0f);
+  EXPECT_EQ(out.delta_l_m(0, 0), 0.02f);
+  // Centre: seven at 2.00 (2500 each) and the noisy one: Σw = 17656.25.
+  EXPECT_NEAR(out.radial_distance_m(1, 1), 2.0 + 156.25 * 0.03 / 17656.25, 1e-6);
+  EXPECT_NEAR(out.delta_l_m(1, 1), 1.0 / std::sqrt(17656.25), 1e-8);
+  // The flags are the caller's to judge again (the Pipeline does).
+  EXPECT_TRUE(out.flags(0, 1).Has(Flag::kHighDeltaL));
+  EXPECT_LT(out.delta_l_m(0, 1), 0.08f / 2.0f);
+}
+
+TEST(DenoiseTest, PixelsWithoutAUsableReadingAreCopiedAndIgnored) {
+  constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  // Row 1 holds five pixels without a usable reading; rows 0 and 2 are a plane at 2 m.
+  MetricFrame f = Flat(5, 3, 2.0f, 0.02f);
+  f.radial_distance_m(1, 0) = kNan;
+  f.delta_l_m(1, 1) = 0.0f;  // below 1e-9 m
+  f.delta_l_m(1, 2) = 2e9f;  // above 1e9 m
+  f.amplitude(1, 3) = kInf;
+  f.delta_l_m(1, 4) = kNan;
+  const MetricFrame out = Denoise(f, {});
+  EXPECT_TRUE(std::isnan(out.radial_distance_m(1, 0)));
+  EXPECT_EQ(out.delta_l_m(1, 1), 0.0f);
+  EXPECT_EQ(out.delta_l_m(1, 2), 2e9f);
+  EXPECT_EQ(out.amplitude(1, 3), kInf);
+  EXPECT_TRUE(std::isnan(out.delta_l_m(1, 4)));
+  // The plane's pixels see only their own row's usable pixels: as support, a NaN or infinite
+  // value would spread and a ΔL of 0 would make ΔL 0.
+  for (const int r : {0, 2}) {
+    for (int c = 0; c < 5; ++c) {
+      const int support = (c == 0 || c == 4) ? 2 : 3;
+      EXPECT_EQ(out.radial_distance_m(r, c), 2.0f) << r << " " << c;
+      EXPECT_NEAR(out.amplitude(r, c), 1000.0f, 1e-3) << r << " " << c;
+      EXPECT_NEAR(out.delta_l_m(r, c), 0.02 / std::sqrt(support), 1e-8) << r << " " << c;
+    }
+  }
+}
+
+TEST(DenoiseTest, AmplitudeIsOptional) {
+  MetricFrame f = Flat(4, 4, 2.0f, 0.02f);
+  f.amplitude = Image<float>();
+  f.radial_distance_m(1, 1) = 2.01f;
+  const MetricFrame out = Denoise(f, {});
+  EXPECT_TRUE(out.amplitude.empty());
+  EXPECT_NEAR(out.radial_distance_m(1, 1), 2.0 + 0.01 / 9.0, 1e-6);
+}
+
+// An independent expectation from statistics: on a plane with independent Gaussian noise σ,
+// the mean of the 3x3 window has σ / 3 (k = 3 leaves out a neighbour only when two readings
+// differ by 3 combined σ, P = 0.27 %, which changes that by well under 1 %). The reported ΔL is
+// σ / sqrt(m) for a support of m readings.
+TEST(DenoiseTest, TheNoiseFallsToTheReportedSigmaOnAPlane) {
+  const int w = 200, h = 200;
+  const float sigma = 0.05f;
+  MetricFrame f = Flat(w, h, 3.0f, sigma);
+  std::mt19937 rng(11);
+  std::normal_distribution<float> noise(0.0f, sigma);
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+    f.radial_distance_m[i] = 3.0f + noise(rng);
+  }
+  const MetricFrame out = Denoise(f, {});
+  double sum = 0.0, sum2 = 0.0;
+  long n = 0, full = 0;
+  for (int r = 1; r + 1 < h; ++r) {
+    for (int c = 1; c + 1 < w; ++c) {
+      const double e = out.radial_distance_m(r, c) - 3.0;
+      sum += e;
+      sum2 += e * e;
+      ++n;
+      // ΔL is σ / sqrt(m) for a support of m readings.
+      const double m = std::round(std::pow(sigma / out.delta_l_m(r, c), 2.0));
+      ASSERT_NEAR(out.delta_l_m(r, c), sigma / std::sqrt(m), 1e-7) << r << " " << c;
+      full += m == 9.0;
+    }
+  }
+  const double mean = sum / static_cast<double>(n);
+  const double sd = std::sqrt(sum2 / static_cast<double>(n) - mean * mean);
+  // 39,204 outputs, each sharing readings with its neighbours (about 4,400 independent windows):
+  // the standard deviation is estimated to about 1 %; 5 % is 4.5 times that.
+  EXPECT_NEAR(sd, sigma / 3.0, 0.05 * sigma / 3.0);
+  EXPECT_NEAR(mean, 0.0, 0.002);
+  // Each neighbour is left out with P = erfc(3 / sqrt 2) = 0.27 %, so all eight are in the
+  // support with P = 0.9973^8 = 0.979 (the count of 39,204 windows is known to about 0.1 %).
+  EXPECT_NEAR(static_cast<double>(full) / static_cast<double>(n), 0.979, 0.006);
+}
+
+// The file comment's definition, evaluated directly: the float support test, sums in double.
+struct Reference {
+  float d, a, s;
+};
+
+Reference Definition(const MetricFrame& f, int row, int col, const DenoiseOptions& o) {
+  const auto usable = [&](int r, int c) {
+    const float d = f.radial_distance_m(r, c), s = f.delta_l_m(r, c), a = f.amplitude(r, c);
+    const auto others =
+        static_cast<std::uint16_t>(kRejectMask & ~static_cast<std::uint16_t>(Flag::kHighDeltaL));
+    return std::isfinite(d) && s >= 1e-9f && s <= 1e9f && std::isfinite(a) &&
+           (f.flags(r, c).bits() & others) == 0;
+  };
+  if (!usable(row, col)) {
+    return {f.radial_distance_m(row, col), f.amplitude(row, col), f.delta_l_m(row, col)};
+  }
+  const float dc = f.radial_distance_m(row, col), sc = f.delta_l_m(row, col);
+  const float k = static_cast<float>(o.support_sigma);
+  const float k2 = k * k;
+  double sw = 0.0, sdev = 0.0, sa = 0.0;
+  for (int r = row - o.radius_px; r <= row + o.radius_px; ++r) {
+    for (int c = col - o.radius_px; c <= col + o.radius_px; ++c) {
+      if (r < 0 || c < 0 || r >= f.height() || c >= f.width() || !usable(r, c)) continue;
+      const float dn = f.radial_distance_m(r, c), sn = f.delta_l_m(r, c);
+      const float dev = dn - dc;
+      if (!(dev * dev <= k2 * (sc * sc + sn * sn))) continue;
+      const double wn = 1.0 / (static_cast<double>(sn) * sn);
+      sw += wn;
+      sdev += wn * dev;
+      sa += wn * f.amplitude(r, c);
+    }
+  }
+  return {static_cast<float>(dc + sdev / sw), static_cast<float>(sa / sw),
+          static_cast<float>(1.0 / std::sqrt(sw))};
+}
+
+TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (const int radius : {1, 2, 3}) {
+    for (const double k : {0.5, 3.0, 10.0}) {
+      for (const auto& [w, h] : {std::pair{1, 1}, std::pair{7, 1}, std::pair{1, 9},
+                                 std::pair{37, 23}, std::pair{64, 5}}) {
+        MetricFrame f = Flat(w, h, 2.0f, 0.02f);
+        for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+          // Two surfaces (1.5 and 4 m), σ from 5 mm to 15 cm, some flags and holes.
+          f.radial_distance_m[i] = (u(rng) < 0.3f ? 4.0f : 1.5f) + 0.1f * (u(rng) - 0.5f);
+          f.delta_l_m[i] = 0.005f + 0.145f * u(rng);
+          f.amplitude[i] = 100.0f + 5000.0f * u(rng);
+          const float x = u(rng);
+          if (x < 0.05f) f.flags[i].Set(Flag::kSaturated);
+          if (x > 0.9f) f.flags[i].Set(Flag::kHighDeltaL);
+          if (x > 0.5f && x < 0.53f)
+            f.radial_distance_m[i] = std::numeric_limits<float>::quiet_NaN();
+        }
+        DenoiseOptions o;
+        o.radius_px = radius;
+        o.support_sigma = k;
+        const MetricFrame out = Denoise(f, o);
+        for (int r = 0; r < h; ++r) {
+          for (int c = 0; c < w; ++c) {
+            const Reference ref = Definition(f, r, c, o);
+            const std::string at = std::to_string(radius) + " " + std::to_string(k) + " " +
+                                   std::to_string(w) + "x" + std::to_string(h) + " (" +
+                                   std::to_string(r) + ", " + std::to_string(c) + ")";
+            if (std::isnan(ref.d)) {
+              EXPECT_TRUE(std::isnan(out.radial_distance_m(r, c))) << at;
+              continue;
+            }
+            // Float sums of at most 49 terms: each term's rounding is at most 2^-24 of it, so
+            // the weighted deviation is off by at most 49 x 6e-8 of the largest deviation in
+            // the support (below 1 m here), plus one rounding of d (4 m): below 4e-6 m. ΔL and
+            // the amplitude likewise, relative: 49 x 6e-8 = 3e-6, here 1e-5.
+            EXPECT_NEAR(out.radial_distance_m(r, c), ref.d, 4e-6) << at;
+            EXPECT_NEAR(out.delta_l_m(r, c), ref.s, 1e-5 * ref.s) << at;
+            EXPECT_NEAR(out.amplitude(r, c), ref.a, 1e-5 * ref.a) << at;
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(DenoiseTest, BadOptionsAndFramesAreErrorsNamingTheProblem) {
+  const MetricFrame f = Flat(4, 4, 2.0f, 0.02f);
+  const auto message = [&](const MetricFrame& frame, const DenoiseOptions& o) {
+    try {
+      (void)Denoise(frame, o);
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  DenoiseOptions o;
+  for (const int r : {0, 4, -1}) {
+    o = {};
+    o.radius_px = r;
+    EXPECT_NE(message(f, o).find("radius_px"), std::string::npos) << r;
+  }
+  for (const double k : {0.0, -1.0, 101.0, std::numeric_limits<double>::quiet_NaN()}) {
+    o = {};
+    o.support_sigma = k;
+    EXPECT_NE(message(f, o).find("support_sigma"), std::string::npos) << k;
+  }
+  MetricFrame no_sigma = f;
+  no_sigma.delta_l_m = Image<float>();
+  EXPECT_NE(message(no_sigma, {}).find("delta_l_m is empty"), std::string::npos);
+  MetricFrame wrong = f;
+  wrong.amplitude = Image<float>(3, 4);
+  EXPECT_NE(message(wrong, {}).find("amplitude is 3x4"), std::string::npos);
+  wrong = f;
+  wrong.delta_l_m = Image<float>(4, 5, 0.02f);
+  EXPECT_NE(message(wrong, {}).find("delta_l_m is 4x5"), std::string::npos);
+  wrong = f;
+  wrong.flags = Image<PixelFlags>(2, 2);
+  EXPECT_NE(message(wrong, {}).find("flags"), std::string::npos);
+  EXPECT_NE(message(MetricFrame{}, {}).find("empty distance"), std::string::npos);
+}
+
+TEST(DenoiseTest, IntoReusesItsBuffers) {
+  MetricFrame f = Flat(8, 6, 2.0f, 0.02f);
+  DenoisedChannels c;
+  DenoiseInto(f, {}, c);
+  const float* d = c.radial_distance_m.data();
+  f.radial_distance_m(3, 3) = 2.05f;
+  DenoiseInto(f, {}, c);
+  EXPECT_EQ(c.radial_distance_m.data(), d);
+  EXPECT_NEAR(c.radial_distance_m(3, 3), 2.0 + 0.05 / 9.0, 1e-6);
+}
+
+}  // namespace
+}  // namespace tofcam
