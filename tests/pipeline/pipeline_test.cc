@@ -366,6 +366,20 @@ sim::SimulatorOptions TestSimulator(std::uint64_t seed) {
   return o;
 }
 
+// The SR-2 facing the built-in wall at `distance_m` metres.
+sim::SimulatedCamera WallCamera(const std::string& distance_m, std::uint64_t seed) {
+  return sim::SimulatedCamera(sim::LoadBuiltinScene("wall", {{"distance_m", distance_m}}),
+                              sim::ResolveCameraModel("sr2"), TestSimulator(seed));
+}
+
+// A fixed exposure (no controller) and ΔL in metres (the SR-2's noise calibration).
+PipelineOptions WallOptions() {
+  PipelineOptions options;
+  options.controller_enabled = false;
+  options.accuracy.scale = 0.165;
+  return options;
+}
+
 // The paper's P-controller, frame by frame: frame t's register is what the pipeline chose at
 // t - 1, and that choice is the printed law evaluated on an independent mean of the raw
 // intensity registers, with the controller's clipped rule: a pixel counts unless its amplitude
@@ -471,11 +485,8 @@ TEST(PipelineSimTest, DefaultControllerHoldsTheSetPointOnEveryBuiltinScene) {
 // filter's restarts). The cloud must be built from the filtered distances.
 TEST(PipelineSimTest, SmoothingAndTemporalFilterLowerTheNoiseAndTheCloudFollows) {
   const auto run = [](bool smoothing, bool temporal) {
-    sim::SimulatedCamera camera(sim::LoadBuiltinScene("wall", {{"distance_m", "2.0"}}),
-                                sim::ResolveCameraModel("sr2"), TestSimulator(9));
-    PipelineOptions options;
-    options.controller_enabled = false;
-    options.accuracy.scale = 0.165;  // σ in metres (the SR-2's noise calibration)
+    sim::SimulatedCamera camera = WallCamera("2.0", 9);
+    PipelineOptions options = WallOptions();
     options.smoothing_enabled = smoothing;
     options.temporal_enabled = temporal;
     Pipeline pipeline(options, camera.Info());
@@ -531,11 +542,8 @@ TEST(PipelineSimTest, DenoisingLowersTheNoiseAndTheAccuracyThresholdJudgesTheMea
     bool kept, high_delta_l;
   };
   const auto run = [](bool denoise) {
-    sim::SimulatedCamera camera(sim::LoadBuiltinScene("wall", {{"distance_m", "3.5"}}),
-                                sim::ResolveCameraModel("sr2"), TestSimulator(21));
-    PipelineOptions options;
-    options.controller_enabled = false;
-    options.accuracy.scale = 0.165;  // σ in metres (the SR-2's noise calibration)
+    sim::SimulatedCamera camera = WallCamera("3.5", 21);
+    PipelineOptions options = WallOptions();
     options.denoise_enabled = denoise;
     Pipeline pipeline(options, camera.Info());
     camera.SetIntegrationTimeRegister(8);
