@@ -33,15 +33,16 @@ struct Prepared {
 // none). |x| <= max float is false for NaN and ±inf.
 TOFCAM_HOT_LOOP void PrepareSpan(std::size_t n, const float* __restrict d,
                                  const float* __restrict s, const float* __restrict a,
-                                 const std::uint16_t* __restrict flags, std::uint16_t blocking,
+                                 const PixelFlags* __restrict flags, std::uint16_t blocking,
                                  float* __restrict usable, float* __restrict var,
                                  float* __restrict inv_var, float* __restrict amplitude) {
   constexpr float kMax = std::numeric_limits<float>::max();
   constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
   for (std::size_t i = 0; i < n; ++i) {
-    // ΔL in [1e-9, 1e9] m: σ² and 1 / σ² are normal floats, and sums of 49 of them finite.
+    // ΔL in [1e-9, 1e9] m: σ² and 1 / σ² are normal floats, and sums of 49 of them finite;
+    // |A| <= 1e15: 49 weights (<= 1e18) times A stay finite too.
     const bool ok = (std::abs(d[i]) <= kMax) & (s[i] >= 1e-9f) & (s[i] <= 1e9f) &
-                    (std::abs(a[i]) <= kMax) & ((flags[i] & blocking) == 0);
+                    (std::abs(a[i]) <= 1e15f) & ((flags[i].bits() & blocking) == 0);
     const float v = ok ? s[i] * s[i] : 1.0f;
     usable[i] = ok ? d[i] : kNan;
     var[i] = ok ? v : 0.0f;
@@ -60,18 +61,17 @@ void Prepare(const MetricFrame& f, Prepared& p) {
   const auto blocking =
       static_cast<std::uint16_t>(kRejectMask & ~static_cast<std::uint16_t>(Flag::kHighDeltaL));
   thread_local std::vector<float> zero_floats;
-  thread_local std::vector<std::uint16_t> zero_flags;
+  thread_local std::vector<PixelFlags> zero_flags;
   const float* a = f.amplitude.data();
   if (f.amplitude.empty()) {
     zero_floats.assign(n, 0.0f);
     a = zero_floats.data();
   }
-  const std::uint16_t* flags = reinterpret_cast<const std::uint16_t*>(f.flags.data());
+  const PixelFlags* flags = f.flags.data();
   if (f.flags.empty()) {
-    zero_flags.assign(n, 0);
+    zero_flags.assign(n, PixelFlags());
     flags = zero_flags.data();
   }
-  static_assert(sizeof(PixelFlags) == sizeof(std::uint16_t));
   PrepareSpan(n, f.radial_distance_m.data(), f.delta_l_m.data(), a, flags, blocking,
               p.usable.data(), p.var.data(), p.inv_var.data(), p.amplitude.data());
 }

@@ -19,12 +19,14 @@ using pipeline_internal::ValidateSection;
 namespace {
 
 // The accuracy threshold's kHighDeltaL judged again on the frame's current ΔL, in its flags and
-// in the filter flags (a stage after the fused pass changed ΔL).
+// in the filter flags (a stage after the fused pass changed ΔL). `raised` is scratch, reused.
 void JudgeDeltaLAgain(const AccuracyThresholdOptions& o, MetricFrame& m,
-                      Image<PixelFlags>& filter_flags) {
+                      Image<PixelFlags>& filter_flags, Image<PixelFlags>& raised) {
   const auto high = static_cast<std::uint16_t>(Flag::kHighDeltaL);
   const auto keep = static_cast<std::uint16_t>(~high);
-  const Image<PixelFlags> raised = AccuracyThresholdFilter(m, o);
+  if (!raised.SameSize(m.radial_distance_m)) raised = Image<PixelFlags>(m.width(), m.height());
+  std::fill(raised.data(), raised.data() + raised.size(), PixelFlags());
+  filters_internal::AccuracyInto(m, o, raised);
   for (std::size_t i = 0; i < raised.size(); ++i) {
     m.flags[i] = PixelFlags(
         static_cast<std::uint16_t>((m.flags[i].bits() & keep) | (raised[i].bits() & high)));
@@ -237,7 +239,8 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
     ApplyNoiseModelEdgeTerm(*options_.accuracy.model, m.radial_distance_m, result.input_flags,
                             m.delta_l_m);
     // The pass judged ΔL without the edge term: judge again.
-    if (filters.accuracy_enabled) JudgeDeltaLAgain(filters.accuracy, m, result.filter_flags);
+    if (filters.accuracy_enabled)
+      JudgeDeltaLAgain(filters.accuracy, m, result.filter_flags, rejudged_);
   }
   if (confidence) {
     // The vendor channel is read by few sources, so it stays out of the fused pass.
@@ -258,7 +261,8 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
     std::swap(m.delta_l_m, denoised_.delta_l_m);
     if (!m.amplitude.empty()) std::swap(m.amplitude, denoised_.amplitude);
     // A pixel rejected only for its single reading's ΔL is judged on its mean's.
-    if (filters.accuracy_enabled) JudgeDeltaLAgain(filters.accuracy, m, result.filter_flags);
+    if (filters.accuracy_enabled)
+      JudgeDeltaLAgain(filters.accuracy, m, result.filter_flags, rejudged_);
   }
   // Dual-frequency unwrapping or the HDR merge: after the per-pixel filters (each frame's own ΔL
   // judged it), before the neighbourhood filters (which then see the combined distances).

@@ -561,8 +561,11 @@ TEST(PipelineSimTest, DenoisingLowersTheNoiseAndTheAccuracyThresholdJudgesTheMea
                              f.flags[i].Valid(), f.flags[i].Has(Flag::kHighDeltaL)});
         }
       }
-      // The flags the pipeline reports match the frame's.
+      // The accuracy threshold judged the final ΔL (its rule: ΔL in [0, 0.07 m] in float), and
+      // the flags the pipeline reports match the frame's.
       for (std::size_t i = 0; i < f.flags.size(); ++i) {
+        const float dl = f.delta_l_m[i];
+        EXPECT_EQ(f.flags[i].Has(Flag::kHighDeltaL), !(dl >= 0.0f && dl <= 0.07f)) << i;
         EXPECT_EQ(f.flags[i].Has(Flag::kHighDeltaL), result.filter_flags[i].Has(Flag::kHighDeltaL));
       }
     }
@@ -592,7 +595,14 @@ TEST(PipelineSimTest, DenoisingLowersTheNoiseAndTheAccuracyThresholdJudgesTheMea
   no_sigma.accuracy_enabled = false;
   no_sigma.filters.accuracy_enabled = false;
   no_sigma.denoise_enabled = true;
-  EXPECT_THROW(Pipeline(no_sigma, TinyCamera()), Error);
+  try {
+    Pipeline refused(no_sigma, TinyCamera());
+    ADD_FAILURE() << "denoising without ΔL was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("denoise.enabled needs accuracy.enabled"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(PipelineSimTest, AccuracyFilterRemovesScatteringAndKeepsGoodPixels) {

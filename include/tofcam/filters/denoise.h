@@ -8,7 +8,8 @@
 /// unwrapping (docs/beyond.md, "Denoising before the pair").
 ///
 /// A pixel is usable when its distance is finite, its ΔL lies in [1e-9, 1e9] m, its amplitude
-/// (if the frame has one) is finite, and it carries no reject bit (kRejectMask) other than
+/// (if the frame has one) lies in [-1e15, 1e15] (so that no weighted sum overflows a float; a
+/// camera's amplitudes are below 1e6), and it carries no reject bit (kRejectMask) other than
 /// kHighDeltaL: a pixel rejected only for its noise is what this stage is for, and the caller
 /// judges ΔL again afterwards (the Pipeline does). Unusable pixels are copied unchanged and are
 /// nobody's support.
@@ -16,18 +17,20 @@
 /// The support of a usable pixel with distance d and σ = ΔL is every usable pixel n of its
 /// (2 r + 1)^2 window (the pixel itself included) with (d_n - d)^2 <= k^2 (σ^2 + σ_n^2) in single
 /// precision, k = support_sigma: a neighbour whose reading differs from the centre's by more than
-/// k combined σ lies on another surface (a depth step, a wrap) and is left out. With weights
+/// k combined σ lies on another surface (a depth step, a wrap) and is left out. This is a hard
+/// cut-off, not a range weight: inside it every neighbour counts by its 1 / σ² alone. With
+/// weights
 /// w_n = 1 / σ_n^2:
 ///   distance  d + Σ w_n (d_n - d) / Σ w_n   (the weighted mean, summed as deviations from d),
 ///   amplitude Σ w_n A_n / Σ w_n,
 ///   ΔL        (Σ w_n)^(-1/2), the σ of the weighted mean of independent readings.
 /// Sums are in single precision in the window's row-major order. Flags and intensity are copied.
 ///
-/// Neighbouring outputs share readings, so their noise is correlated: a test that compares two
-/// neighbours' difference with their ΔL (jump edges, the uncertainty's edge term) sees smaller
-/// differences than independent readings with that ΔL would give, and is stricter, not laxer.
-/// On a plane the mean over a symmetric support is unbiased; on a curved surface, or at a step
-/// smaller than k combined σ, it blends within the noise.
+/// Neighbouring outputs share readings, so their noise is correlated, and the lowered ΔL is
+/// smaller than a real step or slope between two neighbours: tests that compare such a step
+/// with the neighbours' ΔL (jump edges, the uncertainty's edge term) flag more real geometry
+/// after this stage than before it. On a plane the mean over a symmetric support is unbiased;
+/// on a curved surface, or at a step smaller than k combined σ, it blends within the noise.
 
 #include "tofcam/core/frame.h"
 
@@ -43,9 +46,9 @@ struct DenoiseOptions {
 /// The three channels DenoiseInto writes, each the frame's size (amplitude empty when the frame
 /// has none).
 struct DenoisedChannels {
-  Image<float> radial_distance_m;
-  Image<float> amplitude;
-  Image<float> delta_l_m;
+  Image<float> radial_distance_m;  ///< m; unusable pixels: the frame's value.
+  Image<float> amplitude;          ///< The frame's amplitude unit; empty without one.
+  Image<float> delta_l_m;          ///< m, σ of the mean; unusable pixels: the frame's ΔL.
 };
 
 /// The frame with denoised distance, amplitude and ΔL (see the file comment). Throws
