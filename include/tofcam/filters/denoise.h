@@ -19,8 +19,7 @@
 /// precision, k = support_sigma: a neighbour whose reading differs from the centre's by more than
 /// k combined σ lies on another surface (a depth step, a wrap) and is left out. This is a hard
 /// cut-off, not a range weight: inside it every neighbour counts by its 1 / σ² alone. With
-/// weights
-/// w_n = 1 / σ_n^2:
+/// weights w_n = 1 / σ_n^2:
 ///   distance  d + Σ w_n (d_n - d) / Σ w_n   (the weighted mean, summed as deviations from d),
 ///   amplitude Σ w_n A_n / Σ w_n,
 ///   ΔL        (Σ w_n)^(-1/2), the σ of the weighted mean of independent readings.
