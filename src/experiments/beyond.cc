@@ -45,6 +45,7 @@ struct Method {
   // Denoising (tofcam/filters/denoise.h, the library's defaults) before the pair: the ceiling
   // does not apply either (the simulator's σ is the single reading's, not the mean's).
   bool denoise = false;
+  double denoise_max_step_m = 0.0;  // DenoiseOptions::max_step_m
 };
 
 // Whether the per-pixel ceiling applies: the simulator knows the σ of the frames' own readings,
@@ -304,6 +305,9 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        true, true, false, true, false, false, false, true},
       {"beyond, two frequencies + denoising before the pair + smoothing after the filters",
        ControllerKind::kModelBased, false, true, true, false, true, false, true, false, true},
+      {"beyond, two frequencies + denoising before the pair, 0.15 m step limit",
+       ControllerKind::kModelBased, false, true, true, false, true, false, false, false, true,
+       0.15},
   };
   const std::vector<std::string> scenes = sim::BuiltinSceneNames();
   std::vector<Score> pooled(methods.size());
@@ -333,6 +337,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
         p.smoothing.kind = SpatialFilterKind::kBilateral;
       }
       p.denoise_enabled = m.denoise;
+      p.denoise.max_step_m = m.denoise_max_step_m;
       if (m.hdr) {
         p.frame_pair_enabled = true;
         p.hdr_exposure_ratio = kHdrRatio;
@@ -492,7 +497,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << " -> " << Pct(metric(7, "kept_bad_fraction"))
        << "); with edge terms from the pixel's own side as well it is " << F(metric(8, "f1"), 3)
        << ". Denoising before the pair (each pixel's distance and amplitude the ΔL-weighted mean "
-          "of its own surface's 3x3 neighbours, its ΔL that mean's σ, judged again by the "
+          "of its 3x3 neighbours within 3 combined σ, its ΔL that mean's σ, judged again by the "
           "accuracy threshold; then unwrapped) keeps "
        << Pct(metric(9, "good_kept"))
        << " of all pixels good (two frequencies without it: " << Pct(metric(5, "good_kept"))
@@ -502,6 +507,12 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << F(metric(9, "f1"), 3) << " (with smoothing after the filters as well: good "
        << Pct(metric(10, "good_kept")) << ", bad " << Pct(metric(10, "bad_kept")) << ", F1 "
        << F(metric(10, "f1"), 3)
+       << "; with a 0.15 m step limit as well (noisy depth steps kept apart, but a noisy "
+          "pixel's mean leans towards its own reading): good "
+       << Pct(metric(11, "good_kept")) << ", bad " << Pct(metric(11, "bad_kept")) << ", F1 "
+       << F(metric(11, "f1"), 3) << ", RMSE within L under the footprint truth "
+       << Mm(metric(11, "footprint_rmse_kept_within_l")) << " against "
+       << Mm(metric(9, "footprint_rmse_kept_within_l")) << " without it"
        << "). The F1 scores the rejections against the pixels that are bad in the output: a "
           "method that makes pixels good leaves fewer bad ones to find, and its rejections of "
           "pixels it could not make good weigh more. Between methods that change the values, "
@@ -570,6 +581,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
     r.metrics["beyond." + key] = metric(5, key);
     r.metrics["denoised." + key] = metric(9, key);
     r.metrics["denoised_smoothed." + key] = metric(10, key);
+    r.metrics["denoised_step_limit." + key] = metric(11, key);
   }
   return r;
 }

@@ -77,17 +77,19 @@ void Prepare(const MetricFrame& f, Prepared& p) {
 }
 
 // One window offset over a row's columns: where the neighbour (dn, vn, wn, an) is within k
-// combined σ of the centre (dc, vc), its weight, weighted deviation and weighted amplitude join
+// combined σ of the centre (dc, vc) and within s (s2 = s², +inf for no limit), its weight,
+// weighted deviation and weighted amplitude join
 // the sums. NaN distances (unusable pixels) fail the test. Vectorised (clones for AVX2); built
 // without contraction, so every clone rounds alike.
-TOFCAM_HOT_LOOP void DenoiseOffset(int n, float k2, const float* __restrict dc,
+TOFCAM_HOT_LOOP void DenoiseOffset(int n, float k2, float s2, const float* __restrict dc,
                                    const float* __restrict vc, const float* __restrict dn,
                                    const float* __restrict vn, const float* __restrict wn,
                                    const float* __restrict an, float* __restrict sum_w,
                                    float* __restrict sum_dev, float* __restrict sum_a) {
   for (int i = 0; i < n; ++i) {
     const float dev = dn[i] - dc[i];
-    const bool in = dev * dev <= k2 * (vc[i] + vn[i]);
+    const float limit = k2 * (vc[i] + vn[i]);
+    const bool in = dev * dev <= (limit < s2 ? limit : s2);
     sum_w[i] += in ? wn[i] : 0.0f;
     sum_dev[i] += in ? wn[i] * dev : 0.0f;
     sum_a[i] += in ? wn[i] * an[i] : 0.0f;
@@ -123,6 +125,10 @@ void DenoiseOptions::Validate() const {
         ErrorCode::kInvalidArgument,
         "denoise.support_sigma = " + std::to_string(support_sigma) + " is outside (0, 100]");
   }
+  if (!(max_step_m >= 0.0 && max_step_m <= 1e6)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "denoise.max_step_m = " + std::to_string(max_step_m) + " is outside [0, 1e6]");
+  }
 }
 
 void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, DenoisedChannels& out) {
@@ -157,6 +163,8 @@ void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, Denois
   discard.resize(has_a ? 0 : static_cast<std::size_t>(w));  // the amplitude a frame lacks
   const float k = static_cast<float>(options.support_sigma);
   const float k2 = k * k;
+  const float s = static_cast<float>(options.max_step_m);
+  const float s2 = options.max_step_m > 0.0 ? s * s : std::numeric_limits<float>::infinity();
   const int r = options.radius_px;
   for (int row = 0; row < h; ++row) {
     std::fill(sum_w.begin(), sum_w.end(), 0.0f);
@@ -171,7 +179,7 @@ void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, Denois
         const std::size_t at = c0 + static_cast<std::size_t>(first);
         const std::size_t n_at = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) +
                                  static_cast<std::size_t>(first + dx);
-        DenoiseOffset(last - first, k2, p.usable.data() + at, p.var.data() + at,
+        DenoiseOffset(last - first, k2, s2, p.usable.data() + at, p.var.data() + at,
                       p.usable.data() + n_at, p.var.data() + n_at, p.inv_var.data() + n_at,
                       p.amplitude.data() + n_at, sum_w.data() + first, sum_dev.data() + first,
                       sum_a.data() + first);

@@ -129,6 +129,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
               v.Field("radius_px", o.denoise.radius_px, "window half-size, [1, 3]");
               v.Field("support_sigma", o.denoise.support_sigma,
                       "neighbours within this many combined σ, (0, 100]");
+              v.Field("max_step_m", o.denoise.max_step_m,
+                      "m, [0, 1e6]: neighbours within this of the centre too; 0 = no limit");
             });
   v.Section("smoothing", "edge-preserving spatial smoothing of kept distances (not in the paper)",
             [&] {

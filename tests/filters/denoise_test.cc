@@ -69,10 +69,31 @@ TEST(DenoiseTest, AStepOfMoreThanKCombinedSigmaIsNotMixed) {
   EXPECT_NEAR(out.delta_l_m(2, 2), 0.02 / std::sqrt(6.0), 1e-8);
   EXPECT_NEAR(out.delta_l_m(2, 3), 0.02 / std::sqrt(6.0), 1e-8);
   EXPECT_NEAR(out.delta_l_m(2, 1), 0.02 / 3.0, 1e-8);
-  // A k whose support spans the step mixes the two halves.
+  // A k whose support spans the step mixes the two halves, unless max_step_m holds them apart.
   DenoiseOptions wide;
   wide.support_sigma = 100.0;  // 100 x 0.028 m = 2.8 m > 2 m
+  wide.max_step_m = 0.0;       // no limit
   EXPECT_GT(Denoise(f, wide).radial_distance_m(2, 2), 1.5f);
+  wide.max_step_m = 0.15;
+  EXPECT_EQ(Denoise(f, wide).radial_distance_m(2, 2), 1.0f);
+}
+
+TEST(DenoiseTest, MaxStepKeepsNoisySurfacesApart) {
+  // Two noisy surfaces 0.2 m apart (σ 10 cm): 3 combined σ is 0.42 m, so k alone mixes them.
+  // Hand-computed for the pixel (1, 1) on the near side of a 3x3 frame whose right column is
+  // far: with no step limit all nine readings (equal weights) give 1 + 3 x 0.2 / 9; with
+  // 0.15 m only its own six.
+  MetricFrame f = Flat(3, 3, 1.0f, 0.1f);
+  for (int r = 0; r < 3; ++r) f.radial_distance_m(r, 2) = 1.2f;
+  DenoiseOptions o;
+  o.max_step_m = 0.0;
+  EXPECT_NEAR(Denoise(f, o).radial_distance_m(1, 1), 1.0 + 3.0 * 0.2 / 9.0, 1e-6);
+  o.max_step_m = 0.15;
+  const MetricFrame out = Denoise(f, o);
+  EXPECT_EQ(out.radial_distance_m(1, 1), 1.0f);
+  EXPECT_NEAR(out.delta_l_m(1, 1), 0.1 / std::sqrt(6.0), 1e-8);
+  // No limit by default.
+  EXPECT_NEAR(Denoise(f, {}).radial_distance_m(1, 1), 1.0 + 3.0 * 0.2 / 9.0, 1e-6);
 }
 
 TEST(DenoiseTest, RejectedPixelsAreNeitherChangedNorUsedExceptForTheirNoise) {
@@ -204,6 +225,7 @@ Reference Definition(const MetricFrame& f, int row, int col, const DenoiseOption
   const float dc = f.radial_distance_m(row, col), sc = f.delta_l_m(row, col);
   const float k = static_cast<float>(o.support_sigma);
   const float k2 = k * k;
+  const float step = static_cast<float>(o.max_step_m);
   double sw = 0.0, sdev = 0.0, sa = 0.0;
   for (int r = row - o.radius_px; r <= row + o.radius_px; ++r) {
     for (int c = col - o.radius_px; c <= col + o.radius_px; ++c) {
@@ -211,6 +233,7 @@ Reference Definition(const MetricFrame& f, int row, int col, const DenoiseOption
       const float dn = f.radial_distance_m(r, c), sn = f.delta_l_m(r, c);
       const float dev = dn - dc;
       if (!(dev * dev <= k2 * (sc * sc + sn * sn))) continue;
+      if (o.max_step_m > 0.0 && !(dev * dev <= step * step)) continue;
       const double wn = 1.0 / (static_cast<double>(sn) * sn);
       sw += wn;
       sdev += wn * dev;
@@ -225,7 +248,8 @@ TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   for (const int radius : {1, 2, 3}) {
-    for (const double k : {0.5, 3.0, 10.0}) {
+    for (const auto& [k, max_step] :
+         {std::pair{0.5, 0.0}, std::pair{3.0, 0.15}, std::pair{3.0, 0.0}, std::pair{10.0, 0.05}}) {
       for (const auto& [w, h] : {std::pair{1, 1}, std::pair{7, 1}, std::pair{1, 9},
                                  std::pair{37, 23}, std::pair{64, 5}}) {
         MetricFrame f = Flat(w, h, 2.0f, 0.02f);
@@ -243,6 +267,7 @@ TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
         DenoiseOptions o;
         o.radius_px = radius;
         o.support_sigma = k;
+        o.max_step_m = max_step;
         // Each pattern also without amplitude and flags (every flagged pixel then usable).
         for (const bool bare : {false, true}) {
           if (bare) {
@@ -299,6 +324,11 @@ TEST(DenoiseTest, BadOptionsAndFramesAreErrorsNamingTheProblem) {
     o = {};
     o.support_sigma = k;
     EXPECT_NE(message(f, o).find("support_sigma"), std::string::npos) << k;
+  }
+  for (const double s : {-0.01, 2e6, std::numeric_limits<double>::quiet_NaN()}) {
+    o = {};
+    o.max_step_m = s;
+    EXPECT_NE(message(f, o).find("max_step_m"), std::string::npos) << s;
   }
   MetricFrame no_sigma = f;
   no_sigma.delta_l_m = Image<float>();

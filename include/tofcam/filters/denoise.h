@@ -15,11 +15,13 @@
 /// nobody's support.
 ///
 /// The support of a usable pixel with distance d and σ = ΔL is every usable pixel n of its
-/// (2 r + 1)^2 window (the pixel itself included) with (d_n - d)^2 <= k^2 (σ^2 + σ_n^2) in single
-/// precision, k = support_sigma: a neighbour whose reading differs from the centre's by more than
-/// k combined σ lies on another surface (a depth step, a wrap) and is left out. This is a hard
-/// cut-off, not a range weight: inside it every neighbour counts by its 1 / σ² alone. With
-/// weights w_n = 1 / σ_n^2:
+/// (2 r + 1)^2 window (the pixel itself included) with (d_n - d)^2 <= min(k^2 (σ^2 + σ_n^2), s^2)
+/// in single precision, k = support_sigma, s = max_step_m (no limit when 0): a neighbour whose
+/// reading differs from the centre's by more than k combined σ, or by more than s, lies on
+/// another surface (a depth step, a wrap) and is left out. Without s, a step smaller than k
+/// combined σ between two noisy surfaces would be averaged across. This is a hard cut-off, not a
+/// range weight: inside it every neighbour counts by its 1 / σ² alone. With weights
+/// w_n = 1 / σ_n^2:
 ///   distance  d + Σ w_n (d_n - d) / Σ w_n   (the weighted mean, summed as deviations from d),
 ///   amplitude Σ w_n A_n / Σ w_n,
 ///   ΔL        (Σ w_n)^(-1/2), the σ of the weighted mean of independent readings.
@@ -29,7 +31,7 @@
 /// smaller than a real step or slope between two neighbours: tests that compare such a step
 /// with the neighbours' ΔL (jump edges, the uncertainty's edge term) flag more real geometry
 /// after this stage than before it. On a plane the mean over a symmetric support is unbiased;
-/// on a curved surface, or at a step smaller than k combined σ, it blends within the noise.
+/// on a curved surface, or at a step smaller than both limits, it blends within the noise.
 
 #include "tofcam/core/frame.h"
 
@@ -38,6 +40,11 @@ namespace tofcam {
 struct DenoiseOptions {
   int radius_px = 1;           ///< Window half-size: 1 = 3x3, 2 = 5x5; [1, 3].
   double support_sigma = 3.0;  ///< k: support within k combined σ of the centre; (0, 100].
+  /// s: support also within this of the centre, m; [0, 1e6], 0 = no limit (the default). A
+  /// limit keeps depth steps between noisy surfaces apart, but it also leaves out a noisy
+  /// pixel's own-surface neighbours that differ from its reading by more, so its mean leans
+  /// towards its own reading: measured in docs/beyond.md ("Denoising before the pair").
+  double max_step_m = 0.0;
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;
 };
