@@ -42,7 +42,7 @@ struct Method {
   // The ceiling does not apply: the simulator does not know a smoothed value's σ.
   bool smoothing = false;
   bool extrapolate_edges = false;  // UncertaintyOptions::extrapolate_edges
-  // Denoising (tofcam/filters/denoise.h, the library's defaults) before the pair: the ceiling
+  // Denoising (tofcam/filters/denoise.h, its defaults but max_step_m) before the pair: the ceiling
   // does not apply either (the simulator's σ is the single reading's, not the mean's).
   bool denoise = false;
   double denoise_max_step_m = 0.0;  // DenoiseOptions::max_step_m
@@ -507,7 +507,8 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << F(metric(9, "f1"), 3) << " (with smoothing after the filters as well: good "
        << Pct(metric(10, "good_kept")) << ", bad " << Pct(metric(10, "bad_kept")) << ", F1 "
        << F(metric(10, "f1"), 3)
-       << "; with a 0.15 m step limit as well (noisy depth steps kept apart, but a noisy "
+       << "; with a 0.15 m step limit instead of the smoothing (noisy depth steps kept apart, but "
+          "a noisy "
           "pixel's mean leans towards its own reading): good "
        << Pct(metric(11, "good_kept")) << ", bad " << Pct(metric(11, "bad_kept")) << ", F1 "
        << F(metric(11, "f1"), 3) << ", RMSE within L under the footprint truth "
@@ -576,8 +577,9 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
     r.metrics["smoothed." + key] = metric(7, key);
     r.metrics["smoothed_own_side." + key] = metric(8, key);
   }
-  for (const std::string key : {"f1", "precision", "recall", "kept", "kept_bad_fraction",
-                                "good_kept", "bad_kept", "rmse_kept_within_l", "beyond_right"}) {
+  for (const std::string key :
+       {"f1", "precision", "recall", "kept", "kept_bad_fraction", "good_kept", "bad_kept",
+        "rmse_kept_within_l", "beyond_right", "footprint_rmse_kept_within_l"}) {
     r.metrics["beyond." + key] = metric(5, key);
     r.metrics["denoised." + key] = metric(9, key);
     r.metrics["denoised_smoothed." + key] = metric(10, key);
