@@ -158,6 +158,21 @@ void BM_Denoise(benchmark::State& state) {
 }
 BENCHMARK(BM_Denoise)->Apply(Resolutions);
 
+// The same with a plane fitted to each support (DenoiseOptions::fit_plane).
+void BM_DenoisePlane(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  tofcam::DenoisedChannels out;
+  tofcam::DenoiseOptions o;
+  o.fit_plane = true;
+  std::size_t i = 0;
+  for (auto _ : state) {
+    tofcam::DenoiseInto(in.ready[i++ % in.ready.size()], in.rays, o, out);
+    benchmark::DoNotOptimize(out.radial_distance_m.data());
+  }
+  tofcam::bench::SetPixels(state);
+}
+BENCHMARK(BM_DenoisePlane)->Apply(Resolutions);
+
 void BM_Uncertainty(benchmark::State& state) {
   const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
   std::size_t i = 0;

@@ -425,6 +425,14 @@ std::vector<Stage> MakeStages() {
                  DenoiseInto(ws.ready[i % ws.ready.size()], {}, ws.denoised);
                  Sink(ws, ws.denoised.radial_distance_m.data());
                }});
+  // The same with a plane fitted to each support: the rays' x, y and z read as well.
+  s.push_back({"denoise 3x3, fitted plane", 4 + 4 + 4 + 2 + 12 + 12, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 DenoiseOptions o;
+                 o.fit_plane = true;
+                 DenoiseInto(ws.ready[i % ws.ready.size()], ws.input->rays, o, ws.denoised);
+                 Sink(ws, ws.denoised.radial_distance_m.data());
+               }});
   s.push_back({"frame pair (dual-frequency unwrap)", 10 + 10 + 10 + 10, 1, true,
                [](Workspace& ws, std::size_t i) {
                  const MetricFrame& in = ws.pair_17[i % ws.pair_17.size()];

@@ -46,6 +46,7 @@ struct Method {
   // does not apply either (the simulator's σ is the single reading's, not the mean's).
   bool denoise = false;
   double denoise_max_step_m = 0.0;  // DenoiseOptions::max_step_m
+  bool denoise_fit_plane = false;   // DenoiseOptions::fit_plane
 };
 
 // Whether the per-pixel ceiling applies: the simulator knows the σ of the frames' own readings,
@@ -308,6 +309,9 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
       {"beyond, two frequencies + denoising before the pair, 0.15 m step limit",
        ControllerKind::kModelBased, false, true, true, false, true, false, false, false, true,
        0.15},
+      {"beyond, two frequencies + denoising before the pair, a fitted plane",
+       ControllerKind::kModelBased, false, true, true, false, true, false, false, false, true, 0.0,
+       true},
   };
   const std::vector<std::string> scenes = sim::BuiltinSceneNames();
   std::vector<Score> pooled(methods.size());
@@ -338,6 +342,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
       }
       p.denoise_enabled = m.denoise;
       p.denoise.max_step_m = m.denoise_max_step_m;
+      p.denoise.fit_plane = m.denoise_fit_plane;
       if (m.hdr) {
         p.frame_pair_enabled = true;
         p.hdr_exposure_ratio = kHdrRatio;
@@ -514,6 +519,12 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << F(metric(11, "f1"), 3) << ", RMSE within L under the footprint truth "
        << Mm(metric(11, "footprint_rmse_kept_within_l")) << " against "
        << Mm(metric(9, "footprint_rmse_kept_within_l")) << " without it"
+       << "; with a plane fitted to the same support instead of its mean, which is exact on a "
+          "plane at any slant and pinned by each neighbour at its own position: good "
+       << Pct(metric(12, "good_kept")) << ", bad " << Pct(metric(12, "bad_kept")) << ", F1 "
+       << F(metric(12, "f1"), 3) << ", RMSE within L under the footprint truth "
+       << Mm(metric(12, "footprint_rmse_kept_within_l")) << ", central "
+       << Mm(metric(12, "rmse_kept_within_l"))
        << "). The F1 scores the rejections against the pixels that are bad in the output: a "
           "method that makes pixels good leaves fewer bad ones to find, and its rejections of "
           "pixels it could not make good weigh more. Between methods that change the values, "
@@ -584,6 +595,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
     r.metrics["denoised." + key] = metric(9, key);
     r.metrics["denoised_smoothed." + key] = metric(10, key);
     r.metrics["denoised_step_limit." + key] = metric(11, key);
+    r.metrics["denoised_plane." + key] = metric(12, key);
   }
   return r;
 }

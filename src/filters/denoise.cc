@@ -113,6 +113,148 @@ TOFCAM_HOT_LOOP void DenoiseFinish(std::size_t n, const float* __restrict usable
   }
 }
 
+// The plane fit's per-pixel inputs: normalised image coordinates u = x / z, v = y / z of the
+// ray, and t = 1 / z = 1 / (d r_z) where usable (0 elsewhere: never in a support, so its weight
+// is 0 and the finite 0 adds nothing). A usable pixel whose ray is 89.4° or more from the
+// optical axis (r_z < 0.01) has no useful 1/z: its t is NaN, so every window containing it gets
+// NaN sums (0 x NaN, in or out of the support) and falls back to the mean.
+struct PlaneInputs {
+  std::vector<float> u, v, t;
+};
+
+TOFCAM_HOT_LOOP void PreparePlaneSpan(std::size_t n, const float* __restrict usable,
+                                      const float* __restrict rx, const float* __restrict ry,
+                                      const float* __restrict rz, float* __restrict u,
+                                      float* __restrict v, float* __restrict t) {
+  constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool forward = rz[i] >= 0.01f;
+    const float z = forward ? rz[i] : 1.0f;
+    u[i] = rx[i] / z;
+    v[i] = ry[i] / z;
+    const float depth = usable[i] * z;
+    const bool ok = usable[i] == usable[i];  // not NaN
+    t[i] = !ok ? 0.0f : forward && depth > 0.0f ? 1.0f / depth : kNan;
+  }
+}
+
+// The plane fit's inputs with a border of `pad` pixels on every side, so that a window never
+// leaves the arrays: border pixels have a NaN distance (never in a support), and zero weights
+// and offsets. Row stride w + 2 pad.
+struct PaddedPlaneInputs {
+  std::vector<float> d, var, inv_var, u, v, t;
+};
+
+void Pad(const std::vector<float>& in, int w, int h, int pad, float border,
+         std::vector<float>& out) {
+  const std::size_t pw = static_cast<std::size_t>(w + 2 * pad);
+  out.assign(pw * static_cast<std::size_t>(h + 2 * pad), border);
+  for (int r = 0; r < h; ++r) {
+    std::copy_n(
+        in.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(w), w,
+        out.data() + static_cast<std::size_t>(r + pad) * pw + static_cast<std::size_t>(pad));
+  }
+}
+
+// The plane fit's support test for one window offset over a row (as DenoiseOffset's): each
+// centre's weight of the neighbour at `off` (0 outside the support) and 1 or 0 for in or out.
+// `d`, `var`, `inv_var` point at the row's first centre in the padded arrays.
+TOFCAM_HOT_LOOP void PlaneSupport(int n, std::ptrdiff_t off, float k2, float s2,
+                                  const float* __restrict d, const float* __restrict var,
+                                  const float* __restrict inv_var, float* __restrict weight,
+                                  float* __restrict in) {
+  for (int i = 0; i < n; ++i) {
+    const float dev = d[i + off] - d[i];
+    const float limit = k2 * (var[i] + var[i + off]);
+    const float one = dev * dev <= (limit < s2 ? limit : s2) ? 1.0f : 0.0f;
+    // A product, not a select of a load: inv_var is finite (at most 1e18).
+    weight[i] = one * inv_var[i + off];
+    in[i] = one;
+  }
+}
+
+// The fit over a window of radius R for one row (`u`, `v`, `t` at the row's first centre in the
+// padded arrays, `weight` and `in` PlaneSupport's, offset k at k x n): the plane's distance and
+// σ, and 1 where it applies (the support's pixels do not all lie on one line of the pixel grid:
+// their unweighted offsets' covariance determinant, exact in small integers, is positive; the
+// intercept and its variance are positive and finite), else 0. The sums are in double: with a
+// few heavy neighbours the centred moments cancel. No data-dependent branch, so that it
+// vectorises; a dropped lane's division by zero is never used.
+template <int R>
+TOFCAM_HOT_LOOP_WIDE void PlaneFit(int n, std::ptrdiff_t stride, const float* __restrict u,
+                                   const float* __restrict v, const float* __restrict t,
+                                   const float* __restrict rz, const float* __restrict weight,
+                                   const float* __restrict in, float* __restrict plane_d,
+                                   float* __restrict plane_sigma, float* __restrict ok) {
+  constexpr int kSide = 2 * R + 1, kCount = kSide * kSide;
+  for (int i = 0; i < n; ++i) {
+    const double uc = u[i], vc = v[i], tc = t[i];
+    double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, st = 0, stx = 0, sty = 0;
+    float m = 0, px = 0, py = 0, pxx = 0, pxy = 0, pyy = 0;
+#pragma GCC unroll 49
+    for (int k = 0; k < kCount; ++k) {
+      const int oy = k / kSide - R, ox = k % kSide - R;
+      const std::ptrdiff_t j = i + oy * stride + ox;
+      const std::ptrdiff_t ki = static_cast<std::ptrdiff_t>(k) * n + i;
+      // w = 0 outside the support; t is finite there (0 for unusable pixels and the padding)
+      // except next to the axis (see PreparePlaneSpan), so those neighbours add nothing.
+      const double w = weight[ki];
+      const double x = double{u[j]} - uc, y = double{v[j]} - vc, dt = double{t[j]} - tc;
+      const double wx = w * x, wy = w * y, wdt = w * dt;
+      sw += w;
+      sx += wx;
+      sy += wy;
+      sxx += wx * x;
+      sxy += wx * y;
+      syy += wy * y;
+      st += wdt;
+      stx += wdt * x;
+      sty += wdt * y;
+      const float fx = in[ki] * static_cast<float>(ox), fy = in[ki] * static_cast<float>(oy);
+      m += in[ki];
+      px += fx;
+      py += fy;
+      pxx += fx * fx;
+      pxy += fx * fy;
+      pyy += fy * fy;
+    }
+    const double gxx = double{m} * pxx - double{px} * px, gyy = double{m} * pyy - double{py} * py;
+    const double gxy = double{m} * pxy - double{px} * py;
+    const double mx = sx / sw, my = sy / sw, mt = st / sw;
+    const double cxx = sxx - sx * mx, cxy = sxy - sx * my, cyy = syy - sy * my;
+    const double ctx = stx - sx * mt, cty = sty - sy * mt;
+    const double det = cxx * cyy - cxy * cxy;
+    const double gx = (cyy * ctx - cxy * cty) / det, gy = (cxx * cty - cxy * ctx) / det;
+    const double b0 = tc + mt - gx * mx - gy * my;
+    const double dist = 1.0 / (b0 * double{rz[i]});
+    const double variance = 1.0 / sw + (cyy * mx * mx - 2.0 * cxy * mx * my + cxx * my * my) / det;
+    const bool good = (sw > 0.0) & (gxx * gyy - gxy * gxy > 0.5) & (det > 0.0) & (b0 > 0.0) &
+                      (dist <= std::numeric_limits<float>::max()) & (variance > 0.0) &
+                      (variance <= std::numeric_limits<double>::max());
+    const double sigma = std::sqrt(variance);
+    ok[i] = good ? 1.0f : 0.0f;
+    plane_d[i] = static_cast<float>(good ? dist : 0.0);
+    plane_sigma[i] = static_cast<float>(good ? sigma : 0.0);
+  }
+}
+
+// The plane's distance and σ over the mean's where PlaneFit says it applies.
+TOFCAM_HOT_LOOP void PlaneSelect(int n, const float* __restrict ok, const float* __restrict plane_d,
+                                 const float* __restrict plane_sigma, float* __restrict d_out,
+                                 float* __restrict s_out) {
+  for (int i = 0; i < n; ++i) {
+    const float old_d = d_out[i], old_s = s_out[i];
+    d_out[i] = ok[i] > 0.0f ? plane_d[i] : old_d;
+    s_out[i] = ok[i] > 0.0f ? plane_sigma[i] : old_s;
+  }
+}
+
+// Per-row scratch of the plane fit: PlaneSupport's weights and flags for every window offset,
+// and PlaneFit's results.
+struct PlaneRowScratch {
+  std::vector<float> weight, in, d, sigma, ok;
+};
+
 }  // namespace
 
 void DenoiseOptions::Validate() const {
@@ -131,8 +273,66 @@ void DenoiseOptions::Validate() const {
   }
 }
 
-void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, DenoisedChannels& out) {
+namespace {
+
+// The fit_plane path of DenoiseImpl: `out` already holds the mean's results (the fallback).
+void DenoisePlane(const MetricFrame& frame, const RayTable& rays, const DenoiseOptions& options,
+                  const Prepared& p, DenoisedChannels& out) {
+  const int w = frame.radial_distance_m.width(), h = frame.radial_distance_m.height();
+  const std::size_t n = frame.radial_distance_m.size();
+  thread_local PlaneInputs q;
+  q.u.resize(n);
+  q.v.resize(n);
+  q.t.resize(n);
+  PreparePlaneSpan(n, p.usable.data(), rays.x.data(), rays.y.data(), rays.z.data(), q.u.data(),
+                   q.v.data(), q.t.data());
+  const int r = options.radius_px;
+  constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
+  thread_local PaddedPlaneInputs padded;
+  Pad(p.usable, w, h, r, kNan, padded.d);
+  Pad(p.var, w, h, r, 0.0f, padded.var);
+  Pad(p.inv_var, w, h, r, 0.0f, padded.inv_var);
+  Pad(q.u, w, h, r, 0.0f, padded.u);
+  Pad(q.v, w, h, r, 0.0f, padded.v);
+  Pad(q.t, w, h, r, 0.0f, padded.t);
+  const float k = static_cast<float>(options.support_sigma);
+  const float k2 = k * k;
+  const float s = static_cast<float>(options.max_step_m);
+  const float s2 = options.max_step_m > 0.0 ? s * s : std::numeric_limits<float>::infinity();
+  const std::ptrdiff_t stride = w + 2 * r;
+  const int side = 2 * r + 1, count = side * side;
+  const std::size_t wn = static_cast<std::size_t>(w);
+  thread_local PlaneRowScratch scratch;
+  scratch.weight.resize(static_cast<std::size_t>(count) * wn);
+  scratch.in.resize(static_cast<std::size_t>(count) * wn);
+  scratch.d.resize(wn);
+  scratch.sigma.resize(wn);
+  scratch.ok.resize(wn);
+  const auto fit = r == 1 ? PlaneFit<1> : r == 2 ? PlaneFit<2> : PlaneFit<3>;
+  for (int row = 0; row < h; ++row) {
+    const std::size_t at = static_cast<std::size_t>(row + r) * static_cast<std::size_t>(stride) +
+                           static_cast<std::size_t>(r);
+    for (int o = 0; o < count; ++o) {
+      const std::ptrdiff_t off = (o / side - r) * stride + (o % side - r);
+      const std::size_t kw = static_cast<std::size_t>(o) * wn;
+      PlaneSupport(w, off, k2, s2, padded.d.data() + at, padded.var.data() + at,
+                   padded.inv_var.data() + at, scratch.weight.data() + kw, scratch.in.data() + kw);
+    }
+    fit(w, stride, padded.u.data() + at, padded.v.data() + at, padded.t.data() + at,
+        rays.z.Row(row).data(), scratch.weight.data(), scratch.in.data(), scratch.d.data(),
+        scratch.sigma.data(), scratch.ok.data());
+    PlaneSelect(w, scratch.ok.data(), scratch.d.data(), scratch.sigma.data(),
+                out.radial_distance_m.Row(row).data(), out.delta_l_m.Row(row).data());
+  }
+}
+
+void DenoiseImpl(const MetricFrame& frame, const RayTable* rays, const DenoiseOptions& options,
+                 DenoisedChannels& out) {
   options.Validate();
+  if (options.fit_plane && rays == nullptr) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "denoise.fit_plane needs the camera's rays (the overload with a RayTable)");
+  }
   const Image<float>& d = frame.radial_distance_m;
   if (d.empty()) throw Error(ErrorCode::kInvalidArgument, "denoise: empty distance image");
   const int w = d.width(), h = d.height();
@@ -144,6 +344,13 @@ void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, Denois
   CheckSameSize(frame.amplitude, w, h, "amplitude");
   if (!frame.flags.empty() && !frame.flags.SameSize(w, h)) {
     throw Error(ErrorCode::kInvalidArgument, "denoise: flags differ in size from the distance");
+  }
+  if (rays != nullptr &&
+      (!rays->x.SameSize(w, h) || !rays->y.SameSize(w, h) || !rays->z.SameSize(w, h))) {
+    throw Error(ErrorCode::kMismatch, "denoise: the rays are " + std::to_string(rays->x.width()) +
+                                          "x" + std::to_string(rays->x.height()) +
+                                          ", the distance " + std::to_string(w) + "x" +
+                                          std::to_string(h));
   }
   const bool has_a = !frame.amplitude.empty();
   if (!out.radial_distance_m.SameSize(w, h)) out.radial_distance_m = Image<float>(w, h);
@@ -192,11 +399,27 @@ void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, Denois
                   out.radial_distance_m.Row(row).data(), out.delta_l_m.Row(row).data(),
                   has_a ? out.amplitude.Row(row).data() : discard.data());
   }
+  if (options.fit_plane) DenoisePlane(frame, *rays, options, p, out);
+}
+
+}  // namespace
+
+void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, DenoisedChannels& out) {
+  DenoiseImpl(frame, nullptr, options, out);
+}
+
+void DenoiseInto(const MetricFrame& frame, const RayTable& rays, const DenoiseOptions& options,
+                 DenoisedChannels& out) {
+  DenoiseImpl(frame, &rays, options, out);
 }
 
 MetricFrame Denoise(const MetricFrame& frame, const DenoiseOptions& options) {
+  return Denoise(frame, RayTable{}, options);
+}
+
+MetricFrame Denoise(const MetricFrame& frame, const RayTable& rays, const DenoiseOptions& options) {
   DenoisedChannels c;
-  DenoiseInto(frame, options, c);
+  DenoiseImpl(frame, rays.x.empty() ? nullptr : &rays, options, c);
   MetricFrame out = frame;
   out.radial_distance_m = std::move(c.radial_distance_m);
   out.delta_l_m = std::move(c.delta_l_m);

@@ -131,6 +131,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
                       "neighbours within this many combined σ, (0, 100]");
               v.Field("max_step_m", o.denoise.max_step_m,
                       "m, [0, 1e6]: neighbours within this of the centre too; 0 = no limit");
+              v.Field("fit_plane", o.denoise.fit_plane,
+                      "the support's fitted plane at the centre instead of its mean");
             });
   v.Section("smoothing", "edge-preserving spatial smoothing of kept distances (not in the paper)",
             [&] {

@@ -256,7 +256,7 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   }
   // Denoising: before the pair (which then unwraps the means) and the neighbourhood filters.
   if (options_.denoise_enabled) {
-    DenoiseInto(m, options_.denoise, denoised_);
+    DenoiseInto(m, rays_, options_.denoise, denoised_);
     std::swap(m.radial_distance_m, denoised_.radial_distance_m);
     std::swap(m.delta_l_m, denoised_.delta_l_m);
     if (!m.amplitude.empty()) std::swap(m.amplitude, denoised_.amplitude);

@@ -2,12 +2,14 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
 #include <cmath>
 #include <limits>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam {
@@ -206,6 +208,8 @@ TEST(DenoiseTest, TheNoiseFallsToTheReportedSigmaOnAPlane) {
 // The file comment's definition, evaluated directly: the float support test, sums in double.
 struct Reference {
   float d, a, s;
+  // The plane fit's variance inflation: its σ² over the mean's, (Σ w)^-1 (1 where it is none).
+  double inflation = 1.0;
 };
 
 Reference Definition(const MetricFrame& f, int row, int col, const DenoiseOptions& o) {
@@ -302,6 +306,318 @@ TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
       }
     }
   }
+}
+
+// A lens with distortion, so that the rays' normalised coordinates are not a regular grid.
+RayTable DistortedRays(int w, int h) {
+  CameraIntrinsics in = CameraIntrinsics::SwissRangerSr2();
+  in.width = w;
+  in.height = h;
+  in.cx_px = (w - 1) / 2.0;
+  in.cy_px = (h - 1) / 2.0;
+  in.k1 = -0.2;
+  in.k2 = 0.05;
+  in.p1 = 0.001;
+  return MakeRayTable(in);
+}
+
+// The radial distance at which each pixel's ray meets the plane n . p = c (double), σ `sigma`.
+MetricFrame PlaneFrame(const RayTable& rays, const Eigen::Vector3d& n, double c, float sigma) {
+  const int w = rays.x.width(), h = rays.x.height();
+  MetricFrame f = Flat(w, h, 0.0f, sigma);
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+    const Eigen::Vector3d r(rays.x[i], rays.y[i], rays.z[i]);
+    f.radial_distance_m[i] = static_cast<float>(c / n.dot(r));
+  }
+  return f;
+}
+
+TEST(DenoiseTest, AFittedPlaneIsExactOnATiltedPlaneWhereTheMeanIsNot) {
+  // A plane at 4 m turned 75° about the vertical axis, seen through a distorted lens: the
+  // distance changes by several cm a pixel, and is not linear in the pixel. Without noise the
+  // support is every neighbour (a difference of 0 is within any k combined σ). The plane's
+  // 1/z is affine in (u, v), so the fit returns the input itself up to float rounding; the mean
+  // is off by the curvature of d across the window (closed form: about d'' / 3 a pixel
+  // direction, millimetres here).
+  const RayTable rays = DistortedRays(40, 30);
+  const double tilt = 75.0 * M_PI / 180.0;
+  const Eigen::Vector3d normal(std::sin(tilt), 0.0, std::cos(tilt));
+  const MetricFrame f = PlaneFrame(rays, normal, 4.0 * std::cos(tilt), 0.05f);
+  DenoiseOptions plane;
+  plane.support_sigma = 100.0;  // every neighbour in support, however steep the slope
+  plane.fit_plane = true;
+  DenoiseOptions mean = plane;
+  mean.fit_plane = false;
+  const MetricFrame fitted = Denoise(f, rays, plane);
+  const MetricFrame averaged = Denoise(f, rays, mean);
+  double worst_plane = 0.0, worst_mean = 0.0;
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+    const double d = f.radial_distance_m[i];
+    worst_plane = std::max(worst_plane, std::abs(fitted.radial_distance_m[i] - d) / d);
+    worst_mean = std::max(worst_mean, std::abs(averaged.radial_distance_m[i] - d) / d);
+  }
+  // Float inputs and sums: 1/z and the offsets carry relative roundings of about 6e-8, and the
+  // intercept of a window's fit amplifies them by the window's extrapolation (at most 2 for a
+  // corner's 2x2 support): 1e-5 relative is a hundred of them. The mean's error is a property of
+  // the geometry, 3e-4 relative at least (a border pixel's lopsided support is worse).
+  EXPECT_LT(worst_plane, 1e-5);
+  EXPECT_GT(worst_mean, 3e-4);
+}
+
+// The plane fit by its definition, independently: double-precision weighted least squares of
+// 1/z on (1, u - u_c, v - v_c) by Eigen's LU over the same float support (the mean's support
+// test), and the weighted mean where the support does not span a plane.
+Reference PlaneDefinition(const MetricFrame& f, const RayTable& rays, int row, int col,
+                          const DenoiseOptions& o) {
+  DenoiseOptions as_mean = o;
+  as_mean.fit_plane = false;
+  const Reference mean = Definition(f, row, col, as_mean);
+  const auto usable = [&](int r, int c) {
+    const float d = f.radial_distance_m(r, c), s = f.delta_l_m(r, c);
+    const float a = f.amplitude.empty() ? 0.0f : f.amplitude(r, c);
+    const auto others =
+        static_cast<std::uint16_t>(kRejectMask & ~static_cast<std::uint16_t>(Flag::kHighDeltaL));
+    return std::isfinite(d) && s >= 1e-9f && s <= 1e9f && std::abs(a) <= 1e15f &&
+           (f.flags.empty() || (f.flags(r, c).bits() & others) == 0);
+  };
+  if (!usable(row, col)) return mean;
+  const float dc = f.radial_distance_m(row, col), sc = f.delta_l_m(row, col);
+  const float k2 = static_cast<float>(o.support_sigma) * static_cast<float>(o.support_sigma);
+  const float step = static_cast<float>(o.max_step_m);
+  const double uc = rays.x(row, col) / double{rays.z(row, col)};
+  const double vc = rays.y(row, col) / double{rays.z(row, col)};
+  Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  std::vector<std::pair<int, int>> grid;  // the support's pixels
+  double sw = 0.0;
+  for (int r = row - o.radius_px; r <= row + o.radius_px; ++r) {
+    for (int c = col - o.radius_px; c <= col + o.radius_px; ++c) {
+      if (r < 0 || c < 0 || r >= f.height() || c >= f.width() || !usable(r, c)) continue;
+      const float dn = f.radial_distance_m(r, c), sn = f.delta_l_m(r, c);
+      const float dev = dn - dc;
+      if (!(dev * dev <= k2 * (sc * sc + sn * sn))) continue;
+      if (o.max_step_m > 0.0 && !(dev * dev <= step * step)) continue;
+      const double z = rays.z(r, c);
+      const Eigen::Vector3d a(1.0, rays.x(r, c) / z - uc, rays.y(r, c) / z - vc);
+      const double wn = 1.0 / (double{sn} * sn);
+      m += wn * a * a.transpose();
+      b += wn / (double{dn} * z) * a;
+      grid.emplace_back(c, r);
+      sw += wn;
+    }
+  }
+  // Spans a plane (the header's rule): the support's pixels are not all on one grid line.
+  if (grid.size() < 3) return mean;
+  bool line = true;
+  for (std::size_t j = 2; j < grid.size() && line; ++j) {
+    const auto [x0, y0] = grid[0];
+    const auto [x1, y1] = grid[1];
+    const auto [x2, y2] = grid[j];
+    line = (x1 - x0) * (y2 - y0) == (y1 - y0) * (x2 - x0);
+  }
+  if (line) return mean;
+  const Eigen::Matrix3d inv = m.inverse();
+  const double b0 = (inv * b)(0);
+  return {static_cast<float>(1.0 / (b0 * rays.z(row, col))), mean.a,
+          static_cast<float>(std::sqrt(inv(0, 0))), inv(0, 0) * sw};
+}
+
+TEST(DenoiseTest, AFittedPlaneEqualsItsDefinitionForEveryRadiusAndPattern) {
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (const int radius : {1, 2, 3}) {
+    for (const auto& [k, max_step] :
+         {std::pair{0.5, 0.0}, std::pair{3.0, 0.06}, std::pair{3.0, 0.0}, std::pair{10.0, 0.05}}) {
+      for (const auto& [w, h] : {std::pair{1, 1}, std::pair{7, 1}, std::pair{1, 9}, std::pair{2, 2},
+                                 std::pair{37, 23}, std::pair{64, 5}}) {
+        const RayTable rays = DistortedRays(w, h);
+        // Two tilted planes (one near, one far), σ from 5 mm to 15 cm, flags and holes.
+        const MetricFrame near =
+            PlaneFrame(rays, Eigen::Vector3d(0.3, -0.2, 1.0).normalized(), 1.5, 0.02f);
+        const MetricFrame far =
+            PlaneFrame(rays, Eigen::Vector3d(-0.6, 0.1, 0.8).normalized(), 4.0, 0.02f);
+        MetricFrame f = near;
+        for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+          const float sigma = 0.005f + 0.145f * u(rng);
+          const float surface =
+              u(rng) < 0.3f ? far.radial_distance_m[i] : near.radial_distance_m[i];
+          f.radial_distance_m[i] = surface + sigma * 2.0f * (u(rng) - 0.5f);
+          f.delta_l_m[i] = sigma;
+          f.amplitude[i] = 100.0f + 5000.0f * u(rng);
+          const float x = u(rng);
+          if (x < 0.05f) f.flags[i].Set(Flag::kSaturated);
+          if (x > 0.9f) f.flags[i].Set(Flag::kHighDeltaL);
+          if (x > 0.5f && x < 0.53f)
+            f.radial_distance_m[i] = std::numeric_limits<float>::quiet_NaN();
+        }
+        DenoiseOptions o;
+        o.radius_px = radius;
+        o.support_sigma = k;
+        o.max_step_m = max_step;
+        o.fit_plane = true;
+        for (const bool bare : {false, true}) {
+          if (bare) {
+            f.amplitude = Image<float>();
+            f.flags = Image<PixelFlags>();
+          }
+          const MetricFrame out = Denoise(f, rays, o);
+          for (int r = 0; r < h; ++r) {
+            for (int c = 0; c < w; ++c) {
+              const Reference ref = PlaneDefinition(f, rays, r, c, o);
+              const std::string at = std::to_string(radius) + " " + std::to_string(k) + " " +
+                                     std::to_string(max_step) + " " + std::to_string(w) + "x" +
+                                     std::to_string(h) + " (" + std::to_string(r) + ", " +
+                                     std::to_string(c) + ")";
+              if (std::isnan(ref.d)) {
+                EXPECT_TRUE(std::isnan(out.radial_distance_m(r, c))) << at;
+                continue;
+              }
+              // The offsets and 1/z come from float rays and distances (relative roundings of
+              // 6e-8 of u, v and 1/z, so 1e-5 of an offset of a pixel pitch and of a 1/z
+              // deviation of a few σ/d); the extrapolation of a lopsided support multiplies
+              // that by about the variance inflation (σ² over the mean's). 2e-5 x inflation
+              // relative bounds it; a wrong support, weight or offset changes the result by a
+              // percent or more.
+              const double tol = 2e-5 * std::max(1.0, ref.inflation);
+              EXPECT_NEAR(out.radial_distance_m(r, c), ref.d, tol * ref.d) << at;
+              EXPECT_NEAR(out.delta_l_m(r, c), ref.s, tol * ref.s) << at;
+              if (!bare) {
+                EXPECT_NEAR(out.amplitude(r, c), ref.a, 1e-5 * ref.a) << at;
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(DenoiseTest, AFittedPlaneHasTheMeansNoiseOnAFullWindowAndMoreWhereItExtrapolates) {
+  // A fronto-parallel plane with σ 5 cm: where the whole window is support, the offsets are
+  // symmetric (no distortion), so the intercept's σ is the mean's, σ / 3. A pixel whose support
+  // is its own column and one side's (the plane's edge: the other side is a hole) extrapolates
+  // one column: for three rows of equal weights at x = 0 and 1 the intercept's variance is
+  // σ² (1/6 + 0.25 / 1.5) = σ² / 3.
+  CameraIntrinsics in = CameraIntrinsics::SwissRangerSr2();
+  in.width = 200;
+  in.height = 200;
+  in.cx_px = 99.5;
+  in.cy_px = 99.5;
+  const RayTable rays = MakeRayTable(in);
+  const float sigma = 0.05f;
+  MetricFrame f = PlaneFrame(rays, Eigen::Vector3d(0, 0, 1), 3.0, sigma);
+  const MetricFrame truth = f;
+  std::mt19937 rng(12);
+  std::normal_distribution<float> noise(0.0f, sigma);
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) f.radial_distance_m[i] += noise(rng);
+  for (int r = 0; r < 200; ++r)
+    f.radial_distance_m(r, 100) = std::numeric_limits<float>::quiet_NaN();
+  DenoiseOptions o;
+  o.fit_plane = true;
+  const MetricFrame out = Denoise(f, rays, o);
+  double sum2_full = 0.0, sum2_edge = 0.0;
+  long n_full = 0, n_edge = 0;
+  for (int r = 1; r + 1 < 200; ++r) {
+    for (int c = 1; c + 1 < 200; ++c) {
+      if (c == 100) continue;
+      const double e = out.radial_distance_m(r, c) - truth.radial_distance_m(r, c);
+      const double s = out.delta_l_m(r, c);
+      if (c == 99 || c == 101) {
+        // Only pixels whose three support columns... whose six readings are all support.
+        if (std::abs(s - sigma / std::sqrt(3.0)) < 1e-4) {
+          sum2_edge += e * e;
+          ++n_edge;
+        }
+      } else if (std::abs(s - sigma / 3.0) < 1e-5) {
+        sum2_full += e * e;
+        ++n_full;
+      }
+    }
+  }
+  // Full windows: at least 95 % of the interior (P(all nine in support) is 0.98, see above).
+  EXPECT_GT(n_full, static_cast<long>(0.95 * 196 * 196));
+  // The RMS error matches the reported σ: about 4,000 independent windows estimate it to about
+  // 1.1 %; 5 % is 4.5 times that.
+  EXPECT_NEAR(std::sqrt(sum2_full / static_cast<double>(n_full)), sigma / 3.0, 0.05 * sigma / 3.0);
+  // The edge columns: about 380 pixels, overlapping in threes (about 130 independent): the RMS
+  // is estimated to about 6 %; 25 % is four of those.
+  ASSERT_GT(n_edge, 300);
+  EXPECT_NEAR(std::sqrt(sum2_edge / static_cast<double>(n_edge)), sigma / std::sqrt(3.0),
+              0.25 * sigma / std::sqrt(3.0));
+}
+
+TEST(DenoiseTest, AFittedPlaneFallsBackToTheMeanWhereTheSupportIsALine) {
+  // A one-row frame: every support lies on one line, so the plane is undetermined and the
+  // result is the weighted mean's, bit for bit.
+  const RayTable rays = DistortedRays(9, 1);
+  MetricFrame f = Flat(9, 1, 2.0f, 0.03f);
+  for (int c = 0; c < 9; ++c) f.radial_distance_m(0, c) = 2.0f + 0.01f * static_cast<float>(c % 3);
+  DenoiseOptions o;
+  o.fit_plane = true;
+  const MetricFrame plane = Denoise(f, rays, o);
+  o.fit_plane = false;
+  const MetricFrame mean = Denoise(f, rays, o);
+  for (int c = 0; c < 9; ++c) {
+    EXPECT_EQ(plane.radial_distance_m(0, c), mean.radial_distance_m(0, c)) << c;
+    EXPECT_EQ(plane.delta_l_m(0, c), mean.delta_l_m(0, c)) << c;
+  }
+}
+
+TEST(DenoiseTest, AFittedPlaneFallsBackToTheMeanNextToARayAlongTheImagePlane) {
+  // A ray 89.7° from the optical axis (r_z = 0.005) has no useful 1/z: every window holding
+  // that pixel gets the mean, bit for bit; windows without it get the plane (here, on a
+  // noisy tilted plane, a different value).
+  RayTable rays = DistortedRays(7, 7);
+  const float rz = 0.005f;
+  rays.x(3, 3) = std::sqrt(1.0f - rz * rz);
+  rays.y(3, 3) = 0.0f;
+  rays.z(3, 3) = rz;
+  MetricFrame f =
+      PlaneFrame(DistortedRays(7, 7), Eigen::Vector3d(0.5, 0.0, 1.0).normalized(), 2.0, 0.05f);
+  std::mt19937 rng(4);
+  std::normal_distribution<float> noise(0.0f, 0.05f);
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) f.radial_distance_m[i] += noise(rng);
+  DenoiseOptions o;
+  o.support_sigma = 100.0;  // every neighbour in support
+  o.fit_plane = true;
+  const MetricFrame plane = Denoise(f, rays, o);
+  o.fit_plane = false;
+  const MetricFrame mean = Denoise(f, rays, o);
+  for (int r = 0; r < 7; ++r) {
+    for (int c = 0; c < 7; ++c) {
+      const bool near_axis_ray = std::abs(r - 3) <= 1 && std::abs(c - 3) <= 1;
+      if (near_axis_ray) {
+        EXPECT_EQ(plane.radial_distance_m(r, c), mean.radial_distance_m(r, c)) << r << " " << c;
+        EXPECT_EQ(plane.delta_l_m(r, c), mean.delta_l_m(r, c)) << r << " " << c;
+      } else {
+        EXPECT_NE(plane.radial_distance_m(r, c), mean.radial_distance_m(r, c)) << r << " " << c;
+      }
+    }
+  }
+}
+
+TEST(DenoiseTest, AFittedPlaneNeedsRaysOfTheFramesSize) {
+  const MetricFrame f = Flat(4, 4, 2.0f, 0.02f);
+  DenoiseOptions o;
+  o.fit_plane = true;
+  try {
+    (void)Denoise(f, o);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("fit_plane needs the camera's rays"), std::string::npos);
+  }
+  try {
+    (void)Denoise(f, DistortedRays(5, 4), o);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+    EXPECT_NE(std::string(e.what()).find("rays are 5x4"), std::string::npos);
+  }
+  // Without fit_plane the rays are not needed, but must still fit when given.
+  o.fit_plane = false;
+  EXPECT_THROW((void)Denoise(f, DistortedRays(5, 4), o), Error);
+  EXPECT_NO_THROW((void)Denoise(f, o));
 }
 
 TEST(DenoiseTest, BadOptionsAndFramesAreErrorsNamingTheProblem) {

@@ -80,6 +80,7 @@ void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.denoise.radius_px, b.denoise.radius_px);
   EXPECT_EQ(a.denoise.support_sigma, b.denoise.support_sigma);
   EXPECT_EQ(a.denoise.max_step_m, b.denoise.max_step_m);
+  EXPECT_EQ(a.denoise.fit_plane, b.denoise.fit_plane);
   EXPECT_EQ(a.smoothing_enabled, b.smoothing_enabled);
   EXPECT_EQ(a.smoothing.kind, b.smoothing.kind);
   EXPECT_EQ(a.smoothing.radius_px, b.smoothing.radius_px);
@@ -163,6 +164,7 @@ PipelineOptions Unusual() {
   o.denoise.radius_px = 2;
   o.denoise.support_sigma = 2.5;
   o.denoise.max_step_m = 0.2;
+  o.denoise.fit_plane = true;
   o.smoothing_enabled = true;
   o.smoothing.kind = SpatialFilterKind::kBilateral;
   o.smoothing.radius_px = 2;

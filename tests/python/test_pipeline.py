@@ -127,10 +127,11 @@ def test_denoising_before_the_pair_lowers_delta_l_and_is_judged_again():
     # 3x3 inverse-variance mean has about a third of one reading's σ where all nine take part,
     # so the median ΔL of the kept pixels falls well below half, and the accuracy threshold,
     # judged on it again, rejects fewer pixels.
-    def run(denoise):
+    # The fitted plane (fit_plane) has the mean's σ on a wall facing the camera, so the same holds.
+    def run(denoise, fit_plane=False):
         cam = tofcam.SimulatedCamera("wall", seed=3)
         options = {"accuracy": {"scale": 0.165}, "controller": {"enabled": False},
-                   "denoise": {"enabled": denoise}}
+                   "denoise": {"enabled": denoise, "fit_plane": fit_plane}}
         pipe = tofcam.Pipeline(cam.info, options)
         cam.integration_time_register = 8
         res = pipe.process(cam.grab())
@@ -138,8 +139,9 @@ def test_denoising_before_the_pair_lowers_delta_l_and_is_judged_again():
         return np.median(res.frame.delta_l_m[kept]), int(kept.sum())
 
     plain_sigma, plain_kept = run(False)
-    sigma, kept = run(True)
-    assert sigma < 0.5 * plain_sigma
-    assert kept > plain_kept
+    for fit_plane in (False, True):
+        sigma, kept = run(True, fit_plane)
+        assert sigma < 0.5 * plain_sigma
+        assert kept > plain_kept
     with pytest.raises(tofcam.InvalidArgumentError, match="support_sigma"):
         tofcam.PipelineOptions(denoise={"support_sigma": 0})

@@ -27,12 +27,33 @@
 ///   ΔL        (Σ w_n)^(-1/2), the σ of the weighted mean of independent readings.
 /// Sums are in single precision in the window's row-major order. Flags and intensity are copied.
 ///
+/// With `fit_plane`, the distance is instead the centre's value of a plane fitted to the same
+/// support with the same weights: 1/z (z = d r_z, r the pixel's unit ray) is affine in the
+/// normalised image coordinates (u, v) = (r_x / r_z, r_y / r_z) on any plane, so the weighted
+/// least squares of 1/z_n on (1, u_n - u, v_n - v) gives the plane's 1/z at the centre, and
+///   distance  1 / (b_0 r_z),
+///   ΔL        sqrt(1 / Σ w_n + m^T C^-1 m), the σ of b_0 in metres,
+/// with m the support's weighted mean offset (u, v) from the centre and C the offsets' weighted
+/// covariance sums. On a plane, tilted or not, this is exact wherever the weighted mean is biased:
+/// at a slant, and where the support is lopsided (a dim pixel beside bright neighbours of another
+/// surface, which pull a mean to their side but only pin the plane at theirs). ΔL grows where the
+/// fit extrapolates. The weights are 1 / σ_n² as for the mean: the exact weights of 1/z differ
+/// by the factor (d_n^2 r_z)^2, constant across a window to the support's relative depth spread.
+/// The fit in 1/z biases a noisy plane by about σ²/d (2 mm at σ = 10 cm, d = 5 m). Where the
+/// support's pixels all lie on one line of the pixel grid (fewer than three, a row, a column, a
+/// diagonal), where b_0 or its variance is not positive and finite, and in every window that
+/// holds a usable pixel whose ray is 89.4° or more from the optical axis (r_z < 0.01, no useful
+/// 1/z), the pixel gets the weighted mean. The fit's sums are in double precision (they cancel
+/// when a few heavy neighbours dominate).
+/// The amplitude stays the weighted mean. Measured in docs/beyond.md.
+///
 /// Neighbouring outputs share readings, so their noise is correlated, and the lowered ΔL is
 /// smaller than a real step or slope between two neighbours: tests that compare such a step
 /// with the neighbours' ΔL (jump edges, the uncertainty's edge term) flag more real geometry
 /// after this stage than before it. On a plane the mean over a symmetric support is unbiased;
 /// on a curved surface, or at a step smaller than both limits, it blends within the noise.
 
+#include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/frame.h"
 
 namespace tofcam {
@@ -45,6 +66,9 @@ struct DenoiseOptions {
   /// pixel's own-surface neighbours that differ from its reading by more, so its mean leans
   /// towards its own reading: measured in docs/beyond.md ("Denoising before the pair").
   double max_step_m = 0.0;
+  /// Fit a plane to the support instead of averaging it (see the file comment); needs the
+  /// camera's rays (the overloads that take a RayTable).
+  bool fit_plane = false;
   /// Throws Error(kInvalidArgument) naming the field.
   void Validate() const;
 };
@@ -58,12 +82,22 @@ struct DenoisedChannels {
 };
 
 /// The frame with denoised distance, amplitude and ΔL (see the file comment). Throws
-/// Error(kInvalidArgument) for invalid options, an empty distance or ΔL image, or channels of
-/// different sizes.
+/// Error(kInvalidArgument) for invalid options, options.fit_plane (it needs the rays: use the
+/// overload below), an empty distance or ΔL image, or channels of different sizes.
 [[nodiscard]] MetricFrame Denoise(const MetricFrame& frame, const DenoiseOptions& options);
 
+/// The same with the camera's unit rays (each channel the frame's size; MakeRayTable), which
+/// options.fit_plane needs. Throws like the overload above, and Error(kMismatch) when the rays
+/// do not fit the frame.
+[[nodiscard]] MetricFrame Denoise(const MetricFrame& frame, const RayTable& rays,
+                                  const DenoiseOptions& options);
+
 /// The denoised channels alone into `out` (resized when needed; a per-frame loop allocates nothing
-/// once sizes are stable): what the Pipeline uses. Throws like Denoise.
+/// once sizes are stable). Throws like Denoise.
 void DenoiseInto(const MetricFrame& frame, const DenoiseOptions& options, DenoisedChannels& out);
+
+/// The same with the rays: what the Pipeline uses. Throws like Denoise with rays.
+void DenoiseInto(const MetricFrame& frame, const RayTable& rays, const DenoiseOptions& options,
+                 DenoisedChannels& out);
 
 }  // namespace tofcam
