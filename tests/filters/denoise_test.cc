@@ -25,6 +25,30 @@ MetricFrame Flat(int w, int h, float distance, float sigma) {
   return f;
 }
 
+// A lens with distortion, so that the rays' normalised coordinates are not a regular grid.
+RayTable DistortedRays(int w, int h) {
+  CameraIntrinsics in = CameraIntrinsics::SwissRangerSr2();
+  in.width = w;
+  in.height = h;
+  in.cx_px = (w - 1) / 2.0;
+  in.cy_px = (h - 1) / 2.0;
+  in.k1 = -0.2;
+  in.k2 = 0.05;
+  in.p1 = 0.001;
+  return MakeRayTable(in);
+}
+
+// The radial distance at which each pixel's ray meets the plane n . p = c (double), σ `sigma`.
+MetricFrame PlaneFrame(const RayTable& rays, const Eigen::Vector3d& n, double c, float sigma) {
+  const int w = rays.x.width(), h = rays.x.height();
+  MetricFrame f = Flat(w, h, 0.0f, sigma);
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+    const Eigen::Vector3d r(rays.x[i], rays.y[i], rays.z[i]);
+    f.radial_distance_m[i] = static_cast<float>(c / n.dot(r));
+  }
+  return f;
+}
+
 TEST(DenoiseTest, ACentreTakesTheInverseVarianceMeanOfItsWindow) {
   // Hand-computed: eight pixels at 2.00 m with σ 2 cm (weight 2500 m^-2) and amplitude 1000,
   // one at 2.03 m with σ 4 cm (weight 625) and amplitude 500. The centre's support is all nine
@@ -248,19 +272,32 @@ Reference Definition(const MetricFrame& f, int row, int col, const DenoiseOption
           static_cast<float>(1.0 / std::sqrt(sw))};
 }
 
-TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
-  std::mt19937 rng(5);
+// Every radius, k and step limit over frames from 1x1 to 64x5: two noisy tilted planes (near
+// 1.5 and 4 m) seen through a distorted lens, σ from 5 mm to 15 cm, saturated and high-ΔL
+// pixels and holes, each frame also without amplitude and flags (every flagged pixel then
+// usable). For every pixel, `check(out, r, c, ref, at)` compares Denoise's output with
+// `definition(f, rays, r, c, o)`.
+template <typename DefinitionFn, typename Check>
+void ForEveryPattern(std::uint32_t seed, bool fit_plane, DefinitionFn definition, Check check) {
+  std::mt19937 rng(seed);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   for (const int radius : {1, 2, 3}) {
     for (const auto& [k, max_step] :
          {std::pair{0.5, 0.0}, std::pair{3.0, 0.06}, std::pair{3.0, 0.0}, std::pair{10.0, 0.05}}) {
-      for (const auto& [w, h] : {std::pair{1, 1}, std::pair{7, 1}, std::pair{1, 9},
+      for (const auto& [w, h] : {std::pair{1, 1}, std::pair{7, 1}, std::pair{1, 9}, std::pair{2, 2},
                                  std::pair{37, 23}, std::pair{64, 5}}) {
-        MetricFrame f = Flat(w, h, 2.0f, 0.02f);
+        const RayTable rays = DistortedRays(w, h);
+        const MetricFrame near =
+            PlaneFrame(rays, Eigen::Vector3d(0.3, -0.2, 1.0).normalized(), 1.5, 0.02f);
+        const MetricFrame far =
+            PlaneFrame(rays, Eigen::Vector3d(-0.6, 0.1, 0.8).normalized(), 4.0, 0.02f);
+        MetricFrame f = near;
         for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
-          // Two surfaces (1.5 and 4 m), σ from 5 mm to 15 cm, some flags and holes.
-          f.radial_distance_m[i] = (u(rng) < 0.3f ? 4.0f : 1.5f) + 0.1f * (u(rng) - 0.5f);
-          f.delta_l_m[i] = 0.005f + 0.145f * u(rng);
+          const float sigma = 0.005f + 0.145f * u(rng);
+          const float surface =
+              u(rng) < 0.3f ? far.radial_distance_m[i] : near.radial_distance_m[i];
+          f.radial_distance_m[i] = surface + sigma * 2.0f * (u(rng) - 0.5f);
+          f.delta_l_m[i] = sigma;
           f.amplitude[i] = 100.0f + 5000.0f * u(rng);
           const float x = u(rng);
           if (x < 0.05f) f.flags[i].Set(Flag::kSaturated);
@@ -272,34 +309,21 @@ TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
         o.radius_px = radius;
         o.support_sigma = k;
         o.max_step_m = max_step;
-        // Each pattern also without amplitude and flags (every flagged pixel then usable).
+        o.fit_plane = fit_plane;
         for (const bool bare : {false, true}) {
           if (bare) {
             f.amplitude = Image<float>();
             f.flags = Image<PixelFlags>();
           }
-          const MetricFrame out = Denoise(f, o);
+          const MetricFrame out = fit_plane ? Denoise(f, rays, o) : Denoise(f, o);
           ASSERT_EQ(out.amplitude.empty(), bare);
           for (int r = 0; r < h; ++r) {
             for (int c = 0; c < w; ++c) {
-              const Reference ref = Definition(f, r, c, o);
               const std::string at = std::to_string(radius) + " " + std::to_string(k) + " " +
                                      std::to_string(max_step) + " " + std::to_string(w) + "x" +
                                      std::to_string(h) + " (" + std::to_string(r) + ", " +
                                      std::to_string(c) + ")";
-              if (std::isnan(ref.d)) {
-                EXPECT_TRUE(std::isnan(out.radial_distance_m(r, c))) << at;
-                continue;
-              }
-              // Float sums of at most 49 terms: each term's rounding is at most 2^-24 of it, so
-              // the weighted deviation is off by at most 49 x 6e-8 of the largest deviation in
-              // the support (below 1 m here), plus one rounding of d (4 m): below 4e-6 m. ΔL and
-              // the amplitude likewise, relative: 49 x 6e-8 = 3e-6, here 1e-5.
-              EXPECT_NEAR(out.radial_distance_m(r, c), ref.d, 4e-6) << at;
-              EXPECT_NEAR(out.delta_l_m(r, c), ref.s, 1e-5 * ref.s) << at;
-              if (!bare) {
-                EXPECT_NEAR(out.amplitude(r, c), ref.a, 1e-5 * ref.a) << at;
-              }
+              check(out, r, c, definition(f, rays, r, c, o), at);
             }
           }
         }
@@ -308,28 +332,28 @@ TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
   }
 }
 
-// A lens with distortion, so that the rays' normalised coordinates are not a regular grid.
-RayTable DistortedRays(int w, int h) {
-  CameraIntrinsics in = CameraIntrinsics::SwissRangerSr2();
-  in.width = w;
-  in.height = h;
-  in.cx_px = (w - 1) / 2.0;
-  in.cy_px = (h - 1) / 2.0;
-  in.k1 = -0.2;
-  in.k2 = 0.05;
-  in.p1 = 0.001;
-  return MakeRayTable(in);
-}
-
-// The radial distance at which each pixel's ray meets the plane n . p = c (double), σ `sigma`.
-MetricFrame PlaneFrame(const RayTable& rays, const Eigen::Vector3d& n, double c, float sigma) {
-  const int w = rays.x.width(), h = rays.x.height();
-  MetricFrame f = Flat(w, h, 0.0f, sigma);
-  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
-    const Eigen::Vector3d r(rays.x[i], rays.y[i], rays.z[i]);
-    f.radial_distance_m[i] = static_cast<float>(c / n.dot(r));
-  }
-  return f;
+TEST(DenoiseTest, EqualsItsDefinitionForEveryRadiusAndPattern) {
+  ForEveryPattern(
+      5, false,
+      [](const MetricFrame& f, const RayTable&, int r, int c, const DenoiseOptions& o) {
+        return Definition(f, r, c, o);
+      },
+      [](const MetricFrame& out, int r, int c, const Reference& ref, const std::string& at) {
+        if (std::isnan(ref.d)) {
+          EXPECT_TRUE(std::isnan(out.radial_distance_m(r, c))) << at;
+          return;
+        }
+        // Float sums of at most 49 terms: each term's rounding is at most 2^-24 of it, so the
+        // weighted deviation is off by at most 49 x 6e-8 of the largest deviation in the
+        // support (below 1 m here: 3 combined σ is at most 0.64 m, and the wide k has a 5 cm
+        // step limit), plus one rounding of d (below 6 m): below 4e-6 m. ΔL and the amplitude
+        // likewise, relative: 49 x 6e-8 = 3e-6, here 1e-5.
+        EXPECT_NEAR(out.radial_distance_m(r, c), ref.d, 4e-6) << at;
+        EXPECT_NEAR(out.delta_l_m(r, c), ref.s, 1e-5 * ref.s) << at;
+        if (!out.amplitude.empty()) {
+          EXPECT_NEAR(out.amplitude(r, c), ref.a, 1e-5 * ref.a) << at;
+        }
+      });
 }
 
 TEST(DenoiseTest, AFittedPlaneIsExactOnATiltedPlaneWhereTheMeanIsNot) {
@@ -423,73 +447,25 @@ Reference PlaneDefinition(const MetricFrame& f, const RayTable& rays, int row, i
 }
 
 TEST(DenoiseTest, AFittedPlaneEqualsItsDefinitionForEveryRadiusAndPattern) {
-  std::mt19937 rng(9);
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  for (const int radius : {1, 2, 3}) {
-    for (const auto& [k, max_step] :
-         {std::pair{0.5, 0.0}, std::pair{3.0, 0.06}, std::pair{3.0, 0.0}, std::pair{10.0, 0.05}}) {
-      for (const auto& [w, h] : {std::pair{1, 1}, std::pair{7, 1}, std::pair{1, 9}, std::pair{2, 2},
-                                 std::pair{37, 23}, std::pair{64, 5}}) {
-        const RayTable rays = DistortedRays(w, h);
-        // Two tilted planes (one near, one far), σ from 5 mm to 15 cm, flags and holes.
-        const MetricFrame near =
-            PlaneFrame(rays, Eigen::Vector3d(0.3, -0.2, 1.0).normalized(), 1.5, 0.02f);
-        const MetricFrame far =
-            PlaneFrame(rays, Eigen::Vector3d(-0.6, 0.1, 0.8).normalized(), 4.0, 0.02f);
-        MetricFrame f = near;
-        for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
-          const float sigma = 0.005f + 0.145f * u(rng);
-          const float surface =
-              u(rng) < 0.3f ? far.radial_distance_m[i] : near.radial_distance_m[i];
-          f.radial_distance_m[i] = surface + sigma * 2.0f * (u(rng) - 0.5f);
-          f.delta_l_m[i] = sigma;
-          f.amplitude[i] = 100.0f + 5000.0f * u(rng);
-          const float x = u(rng);
-          if (x < 0.05f) f.flags[i].Set(Flag::kSaturated);
-          if (x > 0.9f) f.flags[i].Set(Flag::kHighDeltaL);
-          if (x > 0.5f && x < 0.53f)
-            f.radial_distance_m[i] = std::numeric_limits<float>::quiet_NaN();
+  ForEveryPattern(
+      9, true, PlaneDefinition,
+      [](const MetricFrame& out, int r, int c, const Reference& ref, const std::string& at) {
+        if (std::isnan(ref.d)) {
+          EXPECT_TRUE(std::isnan(out.radial_distance_m(r, c))) << at;
+          return;
         }
-        DenoiseOptions o;
-        o.radius_px = radius;
-        o.support_sigma = k;
-        o.max_step_m = max_step;
-        o.fit_plane = true;
-        for (const bool bare : {false, true}) {
-          if (bare) {
-            f.amplitude = Image<float>();
-            f.flags = Image<PixelFlags>();
-          }
-          const MetricFrame out = Denoise(f, rays, o);
-          for (int r = 0; r < h; ++r) {
-            for (int c = 0; c < w; ++c) {
-              const Reference ref = PlaneDefinition(f, rays, r, c, o);
-              const std::string at = std::to_string(radius) + " " + std::to_string(k) + " " +
-                                     std::to_string(max_step) + " " + std::to_string(w) + "x" +
-                                     std::to_string(h) + " (" + std::to_string(r) + ", " +
-                                     std::to_string(c) + ")";
-              if (std::isnan(ref.d)) {
-                EXPECT_TRUE(std::isnan(out.radial_distance_m(r, c))) << at;
-                continue;
-              }
-              // The offsets and 1/z come from float rays and distances (relative roundings of
-              // 6e-8 of u, v and 1/z, so 1e-5 of an offset of a pixel pitch and of a 1/z
-              // deviation of a few σ/d); the extrapolation of a lopsided support multiplies
-              // that by about the variance inflation (σ² over the mean's). 2e-5 x inflation
-              // relative bounds it; a wrong support, weight or offset changes the result by a
-              // percent or more.
-              const double tol = 2e-5 * std::max(1.0, ref.inflation);
-              EXPECT_NEAR(out.radial_distance_m(r, c), ref.d, tol * ref.d) << at;
-              EXPECT_NEAR(out.delta_l_m(r, c), ref.s, tol * ref.s) << at;
-              if (!bare) {
-                EXPECT_NEAR(out.amplitude(r, c), ref.a, 1e-5 * ref.a) << at;
-              }
-            }
-          }
+        // The offsets and 1/z come from float rays and distances (relative roundings of 6e-8 of
+        // u, v and 1/z, so 1e-5 of an offset of a pixel pitch and of a 1/z deviation of a few
+        // σ/d); the extrapolation of a lopsided support multiplies that by about the variance
+        // inflation (σ² over the mean's). 2e-5 x inflation relative bounds it; a wrong support,
+        // weight or offset changes the result by a percent or more.
+        const double tol = 2e-5 * std::max(1.0, ref.inflation);
+        EXPECT_NEAR(out.radial_distance_m(r, c), ref.d, tol * ref.d) << at;
+        EXPECT_NEAR(out.delta_l_m(r, c), ref.s, tol * ref.s) << at;
+        if (!out.amplitude.empty()) {
+          EXPECT_NEAR(out.amplitude(r, c), ref.a, 1e-5 * ref.a) << at;
         }
-      }
-    }
-  }
+      });
 }
 
 TEST(DenoiseTest, AFittedPlaneHasTheMeansNoiseOnAFullWindowAndMoreWhereItExtrapolates) {

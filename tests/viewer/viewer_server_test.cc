@@ -6,12 +6,15 @@
 #include <httplib.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "tofcam/sim/simulated_camera.h"
 
@@ -232,6 +235,47 @@ TEST_F(ViewerServerTest, ControlsApplyToTheNextFrames) {
   ASSERT_TRUE(WaitFrames(2));
   EXPECT_TRUE(server_->Status().recording.empty());
   EXPECT_TRUE(std::filesystem::exists(path)) << path;
+}
+
+TEST_F(ViewerServerTest, TheDenoiseToggleLowersTheFramesDeltaL) {
+  // The hand scene, held at one exposure. Denoising makes each usable pixel's ΔL that of the
+  // inverse-variance mean of its support: σ / 3 where all nine neighbours of equal σ take
+  // part, so the median ΔL of the pixels with one falls well below half (the hand's edges and
+  // the image border have smaller supports; 0.6 leaves room for them). The metadata reports it.
+  const auto median_delta_l = [&] {
+    const auto r = client_->Get("/frame?after=" + std::to_string(server_->Status().frames));
+    EXPECT_TRUE(r && r->status == 200);
+    std::uint32_t prefix[3];
+    std::memcpy(prefix, r->body.data(), 12);
+    const json h = json::parse(r->body.substr(12, prefix[2]));
+    std::vector<float> values;
+    for (const json& p : h.at("planes")) {
+      if (p.at("name") != "delta_l_m") continue;
+      const std::size_t n = static_cast<std::size_t>(h.at("width").get<int>()) *
+                            static_cast<std::size_t>(h.at("height").get<int>());
+      values.resize(n);
+      std::memcpy(values.data(),
+                  r->body.data() + 12 + prefix[2] + p.at("offset").get<std::size_t>(), n * 4);
+    }
+    std::vector<float> finite;
+    for (const float v : values) {
+      if (std::isfinite(v) && v > 0.0f) finite.push_back(v);
+    }
+    EXPECT_GT(finite.size(), values.size() / 4);
+    std::nth_element(finite.begin(), finite.begin() + finite.size() / 2, finite.end());
+    return finite.empty() ? 0.0 : double{finite[finite.size() / 2]};
+  };
+  ASSERT_EQ(Post(R"({"fixed_register": 20})"), 200);
+  ASSERT_TRUE(WaitFrames(3));
+  const double plain = median_delta_l();
+  ASSERT_EQ(Post(R"({"filters": {"denoise": true}})"), 200);
+  ASSERT_TRUE(WaitFrames(3));
+  const double denoised = median_delta_l();
+  EXPECT_GT(plain, 0.0);
+  EXPECT_LT(denoised, 0.6 * plain) << plain << " -> " << denoised;
+  const auto meta = client_->Get("/meta");
+  ASSERT_TRUE(meta && meta->status == 200);
+  EXPECT_TRUE(json::parse(meta->body).at("filters").at("denoise").get<bool>());
 }
 
 }  // namespace

@@ -254,7 +254,8 @@ std::string ViewerServer::Impl::MetaJson() const {
                   {"jump_edge", p.filters.jump_edge_enabled},
                   {"flying_pixel", p.filters.flying_pixel_enabled},
                   {"weingarten", p.filters.weingarten_enabled},
-                  {"uncertainty", p.uncertainty_enabled}};
+                  {"uncertainty", p.uncertainty_enabled},
+                  {"denoise", p.denoise_enabled}};
   m["max_delta_l_m"] = p.filters.accuracy.max_delta_l_m;
   m["min_amplitude"] = p.filters.amplitude.min_amplitude;
   m["max_uncertainty_m"] = p.uncertainty.max_uncertainty_m;
@@ -335,6 +336,10 @@ std::string ViewerServer::Impl::Control(const std::string& body) {
             p.filters.weingarten_enabled = b;
           } else if (name == "uncertainty") {
             p.uncertainty_enabled = b;
+            if (b) p.accuracy_enabled = true;
+          } else if (name == "denoise") {
+            // Not a filter but a stage before them (docs/beyond.md); toggled with them.
+            p.denoise_enabled = b;
             if (b) p.accuracy_enabled = true;
           } else {
             throw std::string("unknown filter '" + name + "'");

@@ -11,8 +11,9 @@ const state = {
 };
 window.viewerState = state;
 
+// 'denoise' is the stage before the filters (each pixel the mean of its own surface's 3x3).
 const FILTERS = ['saturation', 'accuracy', 'amplitude', 'jump_edge', 'flying_pixel',
-                 'weingarten', 'uncertainty'];
+                 'weingarten', 'uncertainty', 'denoise'];
 // Which filter removed a pixel, in the order they are judged; colours for the cause image.
 const CAUSES = [
   ['saturated', [255, 255, 255]], ['low-amplitude', [80, 80, 255]],
