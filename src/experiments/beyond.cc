@@ -310,8 +310,8 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        ControllerKind::kModelBased, false, true, true, false, true, false, false, false, true,
        0.15},
       {"beyond, two frequencies + denoising before the pair, a fitted plane",
-       ControllerKind::kModelBased, false, true, true, false, true, false, false, false, true, 0.0,
-       true},
+       ControllerKind::kModelBased, false, true, true, false, true, false, false, false,
+       /*denoise=*/true, /*denoise_max_step_m=*/0.0, /*denoise_fit_plane=*/true},
   };
   const std::vector<std::string> scenes = sim::BuiltinSceneNames();
   std::vector<Score> pooled(methods.size());

@@ -116,8 +116,9 @@ TOFCAM_HOT_LOOP void DenoiseFinish(std::size_t n, const float* __restrict usable
 // The plane fit's per-pixel inputs: normalised image coordinates u = x / z, v = y / z of the
 // ray, and t = 1 / z = 1 / (d r_z) where usable (0 elsewhere: never in a support, so its weight
 // is 0 and the finite 0 adds nothing). A usable pixel whose ray is 89.4° or more from the
-// optical axis (r_z < 0.01) has no useful 1/z: its t is NaN, so every window containing it gets
-// NaN sums (0 x NaN, in or out of the support) and falls back to the mean.
+// optical axis (r_z < 0.01), or whose distance is not positive, has no useful 1/z: its t is NaN,
+// so every window containing it gets NaN sums (0 x NaN, in or out of the support) and falls back
+// to the mean.
 struct PlaneInputs {
   std::vector<float> u, v, t;
 };
@@ -177,7 +178,8 @@ TOFCAM_HOT_LOOP void PlaneSupport(int n, std::ptrdiff_t off, float k2, float s2,
 // padded arrays, `weight` and `in` PlaneSupport's, offset k at k x n): the plane's distance and
 // σ, and 1 where it applies (the support's pixels do not all lie on one line of the pixel grid:
 // their unweighted offsets' covariance determinant, exact in small integers, is positive; the
-// intercept and its variance are positive and finite), else 0. The sums are in double: with a
+// weighted one is resolved in double; the intercept and its variance are positive and finite),
+// else 0. The sums are in double: with a
 // few heavy neighbours the centred moments cancel. No data-dependent branch, so that it
 // vectorises; a dropped lane's division by zero is never used.
 template <int R>
@@ -190,7 +192,7 @@ TOFCAM_HOT_LOOP_WIDE void PlaneFit(int n, std::ptrdiff_t stride, const float* __
   for (int i = 0; i < n; ++i) {
     const double uc = u[i], vc = v[i], tc = t[i];
     double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0, syy = 0, st = 0, stx = 0, sty = 0;
-    float m = 0, px = 0, py = 0, pxx = 0, pxy = 0, pyy = 0;
+    float count = 0, px = 0, py = 0, pxx = 0, pxy = 0, pyy = 0;
 #pragma GCC unroll 49
     for (int k = 0; k < kCount; ++k) {
       const int oy = k / kSide - R, ox = k % kSide - R;
@@ -211,15 +213,16 @@ TOFCAM_HOT_LOOP_WIDE void PlaneFit(int n, std::ptrdiff_t stride, const float* __
       stx += wdt * x;
       sty += wdt * y;
       const float fx = in[ki] * static_cast<float>(ox), fy = in[ki] * static_cast<float>(oy);
-      m += in[ki];
+      count += in[ki];
       px += fx;
       py += fy;
       pxx += fx * fx;
       pxy += fx * fy;
       pyy += fy * fy;
     }
-    const double gxx = double{m} * pxx - double{px} * px, gyy = double{m} * pyy - double{py} * py;
-    const double gxy = double{m} * pxy - double{px} * py;
+    const double gxx = double{count} * pxx - double{px} * px;
+    const double gyy = double{count} * pyy - double{py} * py;
+    const double gxy = double{count} * pxy - double{px} * py;
     const double mx = sx / sw, my = sy / sw, mt = st / sw;
     const double cxx = sxx - sx * mx, cxy = sxy - sx * my, cyy = syy - sy * my;
     const double ctx = stx - sx * mt, cty = sty - sy * mt;
@@ -228,10 +231,13 @@ TOFCAM_HOT_LOOP_WIDE void PlaneFit(int n, std::ptrdiff_t stride, const float* __
     const double b0 = tc + mt - gx * mx - gy * my;
     const double dist = 1.0 / (b0 * double{rz[i]});
     const double variance = 1.0 / sw + (cyy * mx * mx - 2.0 * cxy * mx * my + cxx * my * my) / det;
-    const bool good = (sw > 0.0) & (gxx * gyy - gxy * gxy > 0.5) & (det > 0.0) & (b0 > 0.0) &
-                      (dist <= std::numeric_limits<float>::max()) & (variance > 0.0) &
-                      (variance <= std::numeric_limits<double>::max());
     const double sigma = std::sqrt(variance);
+    // det > 1e-10 of the uncentred sxx syy: the centring resolves the offsets' spread (weights
+    // within about 1e10 of each other); beyond that a light pixel's offset is rounding noise in
+    // the double sums and the fit would report a confident wrong value.
+    const bool good = (sw > 0.0) & (gxx * gyy - gxy * gxy > 0.5) & (det > 1e-10 * sxx * syy) &
+                      (b0 > 0.0) & (dist <= std::numeric_limits<float>::max()) & (variance > 0.0) &
+                      (sigma <= std::numeric_limits<float>::max());
     ok[i] = good ? 1.0f : 0.0f;
     plane_d[i] = static_cast<float>(good ? dist : 0.0);
     plane_sigma[i] = static_cast<float>(good ? sigma : 0.0);
@@ -329,9 +335,11 @@ void DenoisePlane(const MetricFrame& frame, const RayTable& rays, const DenoiseO
 void DenoiseImpl(const MetricFrame& frame, const RayTable* rays, const DenoiseOptions& options,
                  DenoisedChannels& out) {
   options.Validate();
+  // An empty table is no table (Denoise without rays passes one).
+  if (rays != nullptr && rays->x.empty() && rays->y.empty() && rays->z.empty()) rays = nullptr;
   if (options.fit_plane && rays == nullptr) {
     throw Error(ErrorCode::kInvalidArgument,
-                "denoise.fit_plane needs the camera's rays (the overload with a RayTable)");
+                "denoise.fit_plane needs the camera's rays (a RayTable of the frame's size)");
   }
   const Image<float>& d = frame.radial_distance_m;
   if (d.empty()) throw Error(ErrorCode::kInvalidArgument, "denoise: empty distance image");
@@ -345,12 +353,16 @@ void DenoiseImpl(const MetricFrame& frame, const RayTable* rays, const DenoiseOp
   if (!frame.flags.empty() && !frame.flags.SameSize(w, h)) {
     throw Error(ErrorCode::kInvalidArgument, "denoise: flags differ in size from the distance");
   }
-  if (rays != nullptr &&
-      (!rays->x.SameSize(w, h) || !rays->y.SameSize(w, h) || !rays->z.SameSize(w, h))) {
-    throw Error(ErrorCode::kMismatch, "denoise: the rays are " + std::to_string(rays->x.width()) +
-                                          "x" + std::to_string(rays->x.height()) +
-                                          ", the distance " + std::to_string(w) + "x" +
-                                          std::to_string(h));
+  if (rays != nullptr) {
+    for (const auto& [channel, name] :
+         {std::pair{&rays->x, "x"}, std::pair{&rays->y, "y"}, std::pair{&rays->z, "z"}}) {
+      if (!channel->SameSize(w, h)) {
+        throw Error(ErrorCode::kMismatch,
+                    std::string("denoise: the rays' ") + name + " is " +
+                        std::to_string(channel->width()) + "x" + std::to_string(channel->height()) +
+                        ", the distance " + std::to_string(w) + "x" + std::to_string(h));
+      }
+    }
   }
   const bool has_a = !frame.amplitude.empty();
   if (!out.radial_distance_m.SameSize(w, h)) out.radial_distance_m = Image<float>(w, h);
@@ -419,7 +431,7 @@ MetricFrame Denoise(const MetricFrame& frame, const DenoiseOptions& options) {
 
 MetricFrame Denoise(const MetricFrame& frame, const RayTable& rays, const DenoiseOptions& options) {
   DenoisedChannels c;
-  DenoiseImpl(frame, rays.x.empty() ? nullptr : &rays, options, c);
+  DenoiseImpl(frame, &rays, options, c);
   MetricFrame out = frame;
   out.radial_distance_m = std::move(c.radial_distance_m);
   out.delta_l_m = std::move(c.delta_l_m);

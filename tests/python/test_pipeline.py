@@ -136,12 +136,15 @@ def test_denoising_before_the_pair_lowers_delta_l_and_is_judged_again():
         cam.integration_time_register = 8
         res = pipe.process(cam.grab())
         kept = (res.frame.flags & tofcam.REJECT_MASK) == 0
-        return np.median(res.frame.delta_l_m[kept]), int(kept.sum())
+        return np.median(res.frame.delta_l_m[kept]), int(kept.sum()), res.frame.radial_distance_m
 
-    plain_sigma, plain_kept = run(False)
+    plain_sigma, plain_kept, _ = run(False)
+    distances = {}
     for fit_plane in (False, True):
-        sigma, kept = run(True, fit_plane)
+        sigma, kept, distances[fit_plane] = run(True, fit_plane)
         assert sigma < 0.5 * plain_sigma
         assert kept > plain_kept
+    # The option reaches the stage: the plane's distances are not the mean's.
+    assert not np.array_equal(distances[False], distances[True])
     with pytest.raises(tofcam.InvalidArgumentError, match="support_sigma"):
         tofcam.PipelineOptions(denoise={"support_sigma": 0})

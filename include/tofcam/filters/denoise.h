@@ -30,28 +30,35 @@
 /// With `fit_plane`, the distance is instead the centre's value of a plane fitted to the same
 /// support with the same weights: 1/z (z = d r_z, r the pixel's unit ray) is affine in the
 /// normalised image coordinates (u, v) = (r_x / r_z, r_y / r_z) on any plane, so the weighted
-/// least squares of 1/z_n on (1, u_n - u, v_n - v) gives the plane's 1/z at the centre, and
+/// least squares of 1/z_n on (1, u_n - u, v_n - v) gives the plane's 1/z at the centre, b_0, and
 ///   distance  1 / (b_0 r_z),
-///   ΔL        sqrt(1 / Σ w_n + m^T C^-1 m), the σ of b_0 in metres,
+///   ΔL        sqrt(1 / Σ w_n + m^T C^-1 m), to first order the σ of that distance,
 /// with m the support's weighted mean offset (u, v) from the centre and C the offsets' weighted
-/// covariance sums. On a plane, tilted or not, this is exact wherever the weighted mean is biased:
-/// at a slant, and where the support is lopsided (a dim pixel beside bright neighbours of another
-/// surface, which pull a mean to their side but only pin the plane at theirs). ΔL grows where the
-/// fit extrapolates. The weights are 1 / σ_n² as for the mean: the exact weights of 1/z differ
-/// by the factor (d_n^2 r_z)^2, constant across a window to the support's relative depth spread.
-/// The fit in 1/z biases a noisy plane by about σ²/d (2 mm at σ = 10 cm, d = 5 m). Where the
-/// support's pixels all lie on one line of the pixel grid (fewer than three, a row, a column, a
-/// diagonal), where b_0 or its variance is not positive and finite, and in every window that
-/// holds a usable pixel whose ray is 89.4° or more from the optical axis (r_z < 0.01, no useful
-/// 1/z), the pixel gets the weighted mean. The fit's sums are in double precision (they cancel
-/// when a few heavy neighbours dominate).
+/// centred sums of squares and products. On a plane, tilted or not, the fit is exact, where the
+/// mean is biased by the distance's curvature across the window and, where the support is
+/// lopsided, by its slope. Where the support spans two surfaces the fit is not exact either,
+/// but a dim pixel beside bright neighbours of another surface is pulled less towards them: the
+/// plane is fixed where they are, and the other readings set how it continues to the centre.
+/// ΔL grows where the fit extrapolates. The weights are 1 / σ_n² as for the mean: the exact
+/// weights of 1/z differ by the factor (d_n^2 r_z)^2, so ΔL is off by about twice the support's
+/// relative depth spread. The fit in 1/z biases a noisy plane by about σ²/d (2 mm at σ = 10 cm,
+/// d = 5 m). The pixel gets the weighted mean instead where the support's pixels all lie on one
+/// line of the pixel grid (fewer than three, or any lattice line); where its weights differ by
+/// about 1e10 or more, so that double sums cannot resolve the offsets' spread (the centred
+/// determinant of C below 1e-10 of the uncentred one); where b_0, the distance or ΔL is not
+/// positive and finite; and in every window that holds a usable pixel without a useful 1/z (a
+/// distance that is not positive, or a ray 89.4° or more from the optical axis, r_z < 0.01).
+/// The fit's sums are in double precision (they cancel when a few heavy neighbours dominate).
 /// The amplitude stays the weighted mean. Measured in docs/beyond.md.
 ///
 /// Neighbouring outputs share readings, so their noise is correlated, and the lowered ΔL is
 /// smaller than a real step or slope between two neighbours: tests that compare such a step
 /// with the neighbours' ΔL (jump edges, the uncertainty's edge term) flag more real geometry
-/// after this stage than before it. On a plane the mean over a symmetric support is unbiased;
-/// on a curved surface, or at a step smaller than both limits, it blends within the noise.
+/// after this stage than before it. On a plane facing the camera the mean over a symmetric
+/// support is unbiased to within the distance's small curvature across the window (under 0.1 mm
+/// at 3 m on the SR-2); on a slanted or curved surface the distance is curved across the window
+/// and the mean is biased by that curvature, and at a step smaller than both limits it blends
+/// within the noise.
 
 #include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/frame.h"
@@ -87,8 +94,8 @@ struct DenoisedChannels {
 [[nodiscard]] MetricFrame Denoise(const MetricFrame& frame, const DenoiseOptions& options);
 
 /// The same with the camera's unit rays (each channel the frame's size; MakeRayTable), which
-/// options.fit_plane needs. Throws like the overload above, and Error(kMismatch) when the rays
-/// do not fit the frame.
+/// options.fit_plane needs; an empty table counts as none. Throws like the overload above, and
+/// Error(kMismatch) naming the channel when the rays do not fit the frame.
 [[nodiscard]] MetricFrame Denoise(const MetricFrame& frame, const RayTable& rays,
                                   const DenoiseOptions& options);
 
