@@ -232,9 +232,10 @@ TOFCAM_HOT_LOOP_WIDE void PlaneFit(int n, std::ptrdiff_t stride, const float* __
     const double dist = 1.0 / (b0 * double{rz[i]});
     const double variance = 1.0 / sw + (cyy * mx * mx - 2.0 * cxy * mx * my + cxx * my * my) / det;
     const double sigma = std::sqrt(variance);
-    // det > 1e-10 of the uncentred sxx syy: the centring resolves the offsets' spread (weights
-    // within about 1e10 of each other); beyond that a light pixel's offset is rounding noise in
-    // the double sums and the fit would report a confident wrong value.
+    // det > 1e-10 of the sxx syy about the centre pixel: below that the heavy pixels lie nearly
+    // on one line away from the centre and the light ones' spread is near the double sums'
+    // rounding (a margin of about 1e5), so the fit's slope across that line would rest on
+    // rounding noise.
     const bool good = (sw > 0.0) & (gxx * gyy - gxy * gxy > 0.5) & (det > 1e-10 * sxx * syy) &
                       (b0 > 0.0) & (dist <= std::numeric_limits<float>::max()) & (variance > 0.0) &
                       (sigma <= std::numeric_limits<float>::max());

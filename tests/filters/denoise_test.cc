@@ -410,6 +410,14 @@ Reference PlaneDefinition(const MetricFrame& f, const RayTable& rays, int row, i
            (f.flags.empty() || (f.flags(r, c).bits() & others) == 0);
   };
   if (!usable(row, col)) return mean;
+  // A usable pixel anywhere in the window without a useful 1/z (a distance that is not
+  // positive, a ray with r_z < 0.01) sends the window to the mean (the header's rule).
+  for (int r = row - o.radius_px; r <= row + o.radius_px; ++r) {
+    for (int c = col - o.radius_px; c <= col + o.radius_px; ++c) {
+      if (r < 0 || c < 0 || r >= f.height() || c >= f.width() || !usable(r, c)) continue;
+      if (!(f.radial_distance_m(r, c) > 0.0f && rays.z(r, c) >= 0.01f)) return mean;
+    }
+  }
   const float dc = f.radial_distance_m(row, col), sc = f.delta_l_m(row, col);
   const float k2 = static_cast<float>(o.support_sigma) * static_cast<float>(o.support_sigma);
   const float step = static_cast<float>(o.max_step_m);
@@ -551,50 +559,65 @@ TEST(DenoiseTest, AFittedPlaneFallsBackToTheMeanWhereTheSupportIsALine) {
   }
 }
 
-TEST(DenoiseTest, AFittedPlaneFallsBackToTheMeanNextToARayAlongTheImagePlane) {
-  // A ray 89.7° from the optical axis (r_z = 0.005) has no useful 1/z: every window holding
-  // that pixel gets the mean, bit for bit; windows without it get the plane (here, on a
-  // noisy tilted plane, a different value).
-  RayTable rays = DistortedRays(7, 7);
-  const float rz = 0.005f;
-  rays.x(3, 3) = std::sqrt(1.0f - rz * rz);
-  rays.y(3, 3) = 0.0f;
-  rays.z(3, 3) = rz;
-  MetricFrame f =
-      PlaneFrame(DistortedRays(7, 7), Eigen::Vector3d(0.5, 0.0, 1.0).normalized(), 2.0, 0.05f);
-  std::mt19937 rng(4);
-  std::normal_distribution<float> noise(0.0f, 0.05f);
-  for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) f.radial_distance_m[i] += noise(rng);
-  DenoiseOptions o;
-  o.support_sigma = 100.0;  // every neighbour in support
-  o.fit_plane = true;
-  const MetricFrame plane = Denoise(f, rays, o);
-  o.fit_plane = false;
-  const MetricFrame mean = Denoise(f, rays, o);
-  for (int r = 0; r < 7; ++r) {
-    for (int c = 0; c < 7; ++c) {
-      const bool near_axis_ray = std::abs(r - 3) <= 1 && std::abs(c - 3) <= 1;
-      if (near_axis_ray) {
-        EXPECT_EQ(plane.radial_distance_m(r, c), mean.radial_distance_m(r, c)) << r << " " << c;
-        EXPECT_EQ(plane.delta_l_m(r, c), mean.delta_l_m(r, c)) << r << " " << c;
-      } else {
-        EXPECT_NE(plane.radial_distance_m(r, c), mean.radial_distance_m(r, c)) << r << " " << c;
+TEST(DenoiseTest, AFittedPlaneFallsBackToTheMeanNextToAPixelWithoutA1OverZ) {
+  // A usable pixel without a useful 1/z: a ray 89.7° from the optical axis (r_z = 0.005), or a
+  // distance that is not positive. Every window holding that pixel gets the mean, bit for bit;
+  // windows without it get the plane (here, on a noisy tilted plane, a different value).
+  for (const bool along_image_plane : {true, false}) {
+    SCOPED_TRACE(along_image_plane ? "ray at 89.7 degrees" : "distance -0.5 m");
+    RayTable rays = DistortedRays(7, 7);
+    MetricFrame f =
+        PlaneFrame(DistortedRays(7, 7), Eigen::Vector3d(0.5, 0.0, 1.0).normalized(), 2.0, 0.05f);
+    std::mt19937 rng(4);
+    std::normal_distribution<float> noise(0.0f, 0.05f);
+    for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+      f.radial_distance_m[i] += noise(rng);
+    }
+    if (along_image_plane) {
+      const float rz = 0.005f;
+      rays.x(3, 3) = std::sqrt(1.0f - rz * rz);
+      rays.y(3, 3) = 0.0f;
+      rays.z(3, 3) = rz;
+    } else {
+      f.radial_distance_m(3, 3) = -0.5f;
+    }
+    DenoiseOptions o;
+    o.support_sigma = 100.0;  // every neighbour in support
+    o.fit_plane = true;
+    const MetricFrame plane = Denoise(f, rays, o);
+    o.fit_plane = false;
+    const MetricFrame mean = Denoise(f, rays, o);
+    for (int r = 0; r < 7; ++r) {
+      for (int c = 0; c < 7; ++c) {
+        if (std::abs(r - 3) <= 1 && std::abs(c - 3) <= 1) {
+          EXPECT_EQ(plane.radial_distance_m(r, c), mean.radial_distance_m(r, c)) << r << " " << c;
+          EXPECT_EQ(plane.delta_l_m(r, c), mean.delta_l_m(r, c)) << r << " " << c;
+        } else {
+          EXPECT_NE(plane.radial_distance_m(r, c), mean.radial_distance_m(r, c)) << r << " " << c;
+        }
       }
     }
   }
 }
 
 TEST(DenoiseTest, AFittedPlaneFallsBackToTheMeanWhereWeightsDifferTooMuchToResolve) {
-  // A noise-free 3x3 frame on a tilted plane whose top row is heavy (σ 1 µm, weight 1e12) and
+  // A noise-free 3x3 frame on a tilted plane, through a lens without distortion (so that the
+  // heavy row is straight to float precision), whose top row is heavy (σ 1 µm, weight 1e12) and
   // whose other rows, the centre's among them, are light. The centre's value then rests on the
-  // light rows' offsets from the heavy one, centred about it. With σ 1 km (weight 1e-6, a ratio
-  // of 1e18) those are below the double sums' rounding: the centre gets the mean, bit for bit.
-  // With σ 1 mm (a ratio of 1e6) they are resolved: the plane is the input (exact), and the
-  // mean, pulled to the top row, is not.
-  const RayTable rays = DistortedRays(3, 3);
+  // light rows' offsets from the heavy one. det C / (Σ w x² Σ w y²) is about the light rows'
+  // share of the weight: at a ratio of 1e18 and of 1e12 it is below the guard's 1e-10 and the
+  // centre gets the mean, bit for bit; at 1e6 the fit is used, and on a plane it is the input
+  // (exact) where the mean, pulled to the top row, is not.
+  CameraIntrinsics in = CameraIntrinsics::SwissRangerSr2();
+  in.width = 3;
+  in.height = 3;
+  in.cx_px = 1.0;
+  in.cy_px = 1.0;
+  const RayTable rays = MakeRayTable(in);
   const MetricFrame plane_frame =
       PlaneFrame(rays, Eigen::Vector3d(0.0, 0.6, 0.8).normalized(), 2.0, 1e-6f);
-  for (const auto& [light_sigma, resolved] : {std::pair{1e3f, false}, std::pair{1e-3f, true}}) {
+  for (const auto& [light_sigma, resolved] :
+       {std::pair{1e3f, false}, std::pair{1.0f, false}, std::pair{1e-3f, true}}) {
     MetricFrame f = plane_frame;
     for (const int r : {1, 2}) {
       for (int c = 0; c < 3; ++c) f.delta_l_m(r, c) = light_sigma;

@@ -38,14 +38,17 @@
 /// mean is biased by the distance's curvature across the window and, where the support is
 /// lopsided, by its slope. Where the support spans two surfaces the fit is not exact either,
 /// but a dim pixel beside bright neighbours of another surface is pulled less towards them: the
-/// plane is fixed where they are, and the other readings set how it continues to the centre.
+/// plane is fixed where they are, and the other readings set how it continues to the centre
+/// (typically: measured per scene in docs/beyond.md).
 /// ΔL grows where the fit extrapolates. The weights are 1 / σ_n² as for the mean: the exact
 /// weights of 1/z differ by the factor (d_n^2 r_z)^2, so ΔL is off by about twice the support's
 /// relative depth spread. The fit in 1/z biases a noisy plane by about σ²/d (2 mm at σ = 10 cm,
 /// d = 5 m). The pixel gets the weighted mean instead where the support's pixels all lie on one
-/// line of the pixel grid (fewer than three, or any lattice line); where its weights differ by
-/// about 1e10 or more, so that double sums cannot resolve the offsets' spread (the centred
-/// determinant of C below 1e-10 of the uncentred one); where b_0, the distance or ΔL is not
+/// line of the pixel grid (fewer than three, or any lattice line); where the offsets' weighted
+/// spread is too lopsided to trust the double sums' centring (det C below 1e-10 of Σ w x² Σ w y²,
+/// the offsets x, y measured from the centre pixel: heavy pixels nearly on one line away from the
+/// centre, the others weighing about 1e-10 of them or less; a margin of about 1e5 over where the
+/// sums' rounding would show); where b_0, the distance or ΔL is not
 /// positive and finite; and in every window that holds a usable pixel without a useful 1/z (a
 /// distance that is not positive, or a ray 89.4° or more from the optical axis, r_z < 0.01).
 /// The fit's sums are in double precision (they cancel when a few heavy neighbours dominate).

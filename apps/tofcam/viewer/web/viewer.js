@@ -11,7 +11,8 @@ const state = {
 };
 window.viewerState = state;
 
-// 'denoise' is the stage before the filters (each pixel the mean of its own surface's 3x3).
+// 'denoise' is the stage before the filters (each pixel the mean, or with fit_plane in the
+// configuration the fitted plane, of its own surface's 3x3).
 const FILTERS = ['saturation', 'accuracy', 'amplitude', 'jump_edge', 'flying_pixel',
                  'weingarten', 'uncertainty', 'denoise'];
 // Which filter removed a pixel, in the order they are judged; colours for the cause image.
