@@ -3,7 +3,7 @@
 # when everything is present, uses sudo when not root.
 set -euo pipefail
 packages=(
-  build-essential cmake pkg-config
+  build-essential cmake pkg-config lld
   libeigen3-dev libembree-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev
   libpng-dev libcairo2-dev libhdf5-dev zlib1g-dev libtinyobjloader-dev libnanoflann-dev
   cyclonedds-dev cyclonedds-tools
