@@ -59,10 +59,11 @@ format:
 format-check:
 	@clang-format --dry-run --Werror $(FORMAT_FILES) && echo "format-check: clean"
 
-# Its own configured tree: clang-tidy cannot read the GCC precompiled header the unit tests share
-# (TOFCAM_TEST_PCH), which compile_commands.json names with -include.
+# Its own configured tree: clang-tidy cannot read GCC's precompiled headers (TOFCAM_TEST_PCH,
+# TOFCAM_PCH), which compile_commands.json names with -include.
 tidy: deps
-	@cmake -S . -B $(TIDY_BUILD) -DCMAKE_BUILD_TYPE=Release -DTOFCAM_TEST_PCH=OFF $(CMAKE_FLAGS) >/dev/null
+	@cmake -S . -B $(TIDY_BUILD) -DCMAKE_BUILD_TYPE=Release -DTOFCAM_TEST_PCH=OFF -DTOFCAM_PCH=OFF \
+	  $(CMAKE_FLAGS) >/dev/null
 	@clang-tidy -p $(TIDY_BUILD) --quiet --extra-arg=-Wno-unknown-warning-option $(filter %.cc,$(FORMAT_FILES))
 
 clean:
