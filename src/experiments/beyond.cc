@@ -312,6 +312,11 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
       {"beyond, two frequencies + denoising before the pair, a fitted plane",
        ControllerKind::kModelBased, false, true, true, false, true, false, false, false,
        /*denoise=*/true, /*denoise_max_step_m=*/0.0, /*denoise_fit_plane=*/true},
+      {"beyond, two frequencies + denoising before the pair, a fitted plane, edge terms from the "
+       "own side",
+       ControllerKind::kModelBased, false, true, true, false, true, false, false,
+       /*extrapolate_edges=*/true, /*denoise=*/true, /*denoise_max_step_m=*/0.0,
+       /*denoise_fit_plane=*/true},
   };
   const std::vector<std::string> scenes = sim::BuiltinSceneNames();
   std::vector<Score> pooled(methods.size());
@@ -525,6 +530,11 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << F(metric(12, "f1"), 3) << ", RMSE within L under the footprint truth "
        << Mm(metric(12, "footprint_rmse_kept_within_l")) << ", central "
        << Mm(metric(12, "rmse_kept_within_l"))
+       << "; with the plane and edge terms from the pixel's own side, so that a slanted surface "
+          "whose denoised steps exceed their small σ is not taken for an edge: good "
+       << Pct(metric(13, "good_kept")) << ", bad " << Pct(metric(13, "bad_kept")) << ", F1 "
+       << F(metric(13, "f1"), 3) << ", RMSE within L under the footprint truth "
+       << Mm(metric(13, "footprint_rmse_kept_within_l"))
        << "). The F1 scores the rejections against the pixels that are bad in the output: a "
           "method that makes pixels good leaves fewer bad ones to find, and its rejections of "
           "pixels it could not make good weigh more. Between methods that change the values, "
@@ -596,6 +606,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
     r.metrics["denoised_smoothed." + key] = metric(10, key);
     r.metrics["denoised_step_limit." + key] = metric(11, key);
     r.metrics["denoised_plane." + key] = metric(12, key);
+    r.metrics["denoised_plane_own_side." + key] = metric(13, key);
   }
   return r;
 }
