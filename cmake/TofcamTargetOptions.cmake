@@ -1,13 +1,17 @@
 # Per-target compile settings; tofcam sets no global flags.
 
-# The linker of tofcam's own executables and modules (the tests, the CLI, the Python module):
-# -fuse-ld=<TOFCAM_LINKER>, e.g. lld; empty leaves the compiler's default. `make` picks lld when
+# The linker of every target set up here (what links: the tests, the CLI, the Python module, the
+# benchmarks and tools): -fuse-ld=<TOFCAM_LINKER>, e.g. lld; empty leaves the compiler's default.
+# lld cannot link GCC's LTO objects: with CMAKE_INTERPROCEDURAL_OPTIMIZATION, configure with
+# -DTOFCAM_LINKER= (`make LINKER=`). `make` picks lld when
 # it is installed: it linked a sanitizer-built test in 1.0 s against GNU ld's 2.4 s, and a build
 # links about 90 executables (the CI run must stay under 30 minutes). Private to each target, so
 # nothing of it reaches the exported targets.
 set(TOFCAM_LINKER "" CACHE STRING "Linker for tofcam's executables and modules (-fuse-ld=)")
 if(TOFCAM_LINKER)
   include(CheckLinkerFlag)
+  # Checked again at every configure, so that installing the linker after a failed check helps.
+  unset(TOFCAM_LINKER_WORKS_${TOFCAM_LINKER} CACHE)
   check_linker_flag(CXX "-fuse-ld=${TOFCAM_LINKER}" TOFCAM_LINKER_WORKS_${TOFCAM_LINKER})
   if(NOT TOFCAM_LINKER_WORKS_${TOFCAM_LINKER})
     message(FATAL_ERROR "TOFCAM_LINKER=${TOFCAM_LINKER}: the compiler cannot link with "
