@@ -37,7 +37,7 @@ test: build
 # Unit tests again under AddressSanitizer + UndefinedBehaviorSanitizer (debug, asserts on), without
 # the tests labelled slow (they are not built there either). SANITIZE_DEBUG_INFO: -g1 (line
 # tables) is what the sanitizers' reports need for file:line frames; full -g made a
-# translation unit take 40 % longer to compile (demo_command.cc: 28.4 against 20.4 s), and the CI
+# translation unit take up to 39 % longer to compile (demo_command.cc: 28.4 against 20.4 s), and the CI
 # run (.ci/run) must stay under 30 minutes. `make test-sanitize SANITIZE_DEBUG_INFO=-g` for gdb.
 SANITIZE_DEBUG_INFO ?= -g1
 test-sanitize: deps
