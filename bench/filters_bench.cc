@@ -173,7 +173,21 @@ void BM_DenoisePlane(benchmark::State& state) {
 }
 BENCHMARK(BM_DenoisePlane)->Apply(Resolutions);
 
+// Into a reused image, as a per-frame loop (and Pipeline) runs it.
 void BM_Uncertainty(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  std::size_t i = 0;
+  Image<PixelFlags> out;
+  for (auto _ : state) {
+    tofcam::UncertaintyFilterInto(in.ready[i++ % in.ready.size()], {}, out);
+    benchmark::DoNotOptimize(out.data());
+  }
+  tofcam::bench::SetPixels(state);
+}
+BENCHMARK(BM_Uncertainty)->Apply(Resolutions);
+
+// The form that returns a fresh image per call (allocation and zero fill included).
+void BM_UncertaintyFresh(benchmark::State& state) {
   const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
   std::size_t i = 0;
   for (auto _ : state) {
@@ -182,7 +196,7 @@ void BM_Uncertainty(benchmark::State& state) {
   }
   tofcam::bench::SetPixels(state);
 }
-BENCHMARK(BM_Uncertainty)->Apply(Resolutions);
+BENCHMARK(BM_UncertaintyFresh)->Apply(Resolutions);
 
 // Dual-frequency unwrapping of one frame with its predecessor. The simulated frames are all at
 // 20 MHz; the second is relabelled 17 MHz, so its distances are read as if wrapped at 8.82 m: the

@@ -446,8 +446,8 @@ std::vector<Stage> MakeStages() {
                }});
   s.push_back({"filter: uncertainty (ΔL + edges)", 4 + 4 + 2 + 2, 1, true,
                [](Workspace& ws, std::size_t i) {
-                 const Image<PixelFlags> f = UncertaintyFilter(ws.ready[i % ws.ready.size()]);
-                 Sink(ws, f.data());
+                 UncertaintyFilterInto(ws.ready[i % ws.ready.size()], {}, ws.raised);
+                 Sink(ws, ws.raised.data());
                }});
   // Five frames at -60..60 degrees into the 180-degree cloud and panorama; per input frame
   // (traffic: PanTraffic).

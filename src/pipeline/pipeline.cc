@@ -275,9 +275,9 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
     MergeFlags(m, result.filter_flags);
   }
   if (options_.uncertainty_enabled) {
-    const Image<PixelFlags> raised = UncertaintyFilter(m, options_.uncertainty);
-    MergeFlags(m, raised);
-    for (std::size_t i = 0; i < raised.size(); ++i) result.filter_flags[i] |= raised[i];
+    UncertaintyFilterInto(m, options_.uncertainty, uncertain_);
+    MergeFlags(m, uncertain_);
+    for (std::size_t i = 0; i < uncertain_.size(); ++i) result.filter_flags[i] |= uncertain_[i];
   }
   if (options_.smoothing_enabled) {
     SpatialFilterInto(m, options_.smoothing, smoothed_);

@@ -254,14 +254,16 @@ TEST(FlyingPixelFilterTest, MatchesTheRuleWhenEveryRowHasManyCandidatesAtEvenAnd
 }
 
 TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
-  // Rows are prepared, and rows with many candidates decided two at a time, by AVX-512 loops (16
-  // pixels a step, masked loads and stores at the row's end) where the CPU has them and by
-  // portable ones (8 pixels a step; GCC's clones) elsewhere. Every width from 1 to 70 (every
-  // remainder of both block sizes), the SR-2's 160 and one frame large enough (263 x 211) that
-  // the row preparation prefetches the next row; two noisy rows, then a flat one (its candidates,
+  // AVX-512 CPUs run the rule down 16-pixel column strips (masked loads and stores at the row's
+  // end and edges), in bands of rows on large frames; other CPUs prepare rows and decide rows
+  // with many candidates two at a time (8 pixels a step; GCC's clones). Every width from 1 to 70
+  // (every remainder of both block sizes), the SR-2's 160 and one frame large enough (263 x 211)
+  // that the strips run in three bands of 104 rows and the row preparation prefetches the next
+  // row; two noisy rows, then a flat one (its candidates,
   // if any, tested one by one when the row is decided alone), NaN, infinite and rejected pixels.
   // In both forms the flags must equal the rule, and the bits echoed into a second image (what
-  // FilterSet's later filters see) must equal the flags; the two forms must agree bit for bit.
+  // FilterSet's later filters see) must equal the flags, also when that image is the prior; the
+  // two forms must agree bit for bit.
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::normal_distribution<float> noise(0.0f, 1.0f);
@@ -296,6 +298,14 @@ TEST(FlyingPixelFilterTest, PortableAndAvx512FormsGiveTheSameFlags) {
       for (std::size_t i = 0; i < out.size(); ++i) {
         EXPECT_EQ(echo[i].bits(), out[i].bits() & static_cast<std::uint16_t>(Flag::kFlyingPixel))
             << i;
+      }
+      // The echo image as the prior too, as FilterSet passes them: the same flags (a bit echoed
+      // too early would reject a neighbour's pixel), and the prior's bits plus the raised ones.
+      Image<PixelFlags> shared = f.flags, out_shared(w, h);
+      filters_internal::FlyingPixelInto(f, shared, FlyingPixelOptions{}, out_shared, &shared);
+      for (std::size_t i = 0; i < out.size(); ++i) {
+        EXPECT_EQ(out_shared[i].bits(), out[i].bits()) << i;
+        EXPECT_EQ(shared[i].bits(), f.flags[i].bits() | out[i].bits()) << i;
       }
       return out;
     };

@@ -415,6 +415,47 @@ TEST(Uncertainty, ExtremeValuesAndOptionsFollowTheDefinition) {
   EXPECT_LT(lows, 9 * judged / 10);
 }
 
+TEST(Uncertainty, IntoOverwritesAReusedImageOfAnySize) {
+  // UncertaintyFilterInto into an image of another size (resized), then into the same image
+  // filled with other bits (every pixel overwritten): the flags of the definition each time, in
+  // both forms (the AVX-512 form where the CPU has it, and the portable one).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  MetricFrame m = Blank(37, 9);
+  // Two planes side by side (an edge down the middle), millimetres of noise, some clipped pixels.
+  for (int r = 0; r < m.height(); ++r) {
+    for (int c = 0; c < m.width(); ++c) {
+      m.radial_distance_m(r, c) = (c < m.width() / 2 ? 1.0f : 2.0f) + 0.01f * u(rng);
+      m.delta_l_m(r, c) = 0.002f + 0.03f * u(rng);
+      if (u(rng) < 0.05f) m.flags(r, c) = Flag::kSaturated;
+    }
+  }
+  const UncertaintyOptions o;
+  for (const bool portable : {false, true}) {
+    SCOPED_TRACE(portable ? "portable" : "AVX-512 where available");
+    const internal::PortableFormsForTesting forms(portable);
+    Image<PixelFlags> out(5, 5, PixelFlags(Flag::kJumpEdge));
+    for (int pass = 0; pass < 2; ++pass) {
+      UncertaintyFilterInto(m, o, out);
+      ASSERT_EQ(out.width(), m.width());
+      ASSERT_EQ(out.height(), m.height());
+      int low = 0;
+      for (int r = 0; r < m.height(); ++r) {
+        for (int c = 0; c < m.width(); ++c) {
+          const bool expected = DefinitionLow(m, r, c, o);
+          low += expected;
+          EXPECT_EQ(out(r, c).bits(),
+                    expected ? static_cast<std::uint16_t>(Flag::kLowConfidence) : 0u)
+              << r << "," << c;
+        }
+      }
+      EXPECT_GT(low, 10);  // the edge between the two planes is flagged
+      EXPECT_LT(low, m.width() * m.height() / 2);
+      for (std::size_t i = 0; i < out.size(); ++i) out[i] = PixelFlags(Flag::kJumpEdge);
+    }
+  }
+}
+
 TEST(Uncertainty, BadInputIsAClearError) {
   MetricFrame m = Row({1.0f}, 0.01f);
   m.delta_l_m = Image<float>();
@@ -422,6 +463,9 @@ TEST(Uncertainty, BadInputIsAClearError) {
   UncertaintyOptions o;
   o.max_uncertainty_m = 0;
   EXPECT_THROW((void)ComputeUncertainty(Row({1.0f}, 0.01f), o), Error);
+  Image<PixelFlags> out;
+  EXPECT_THROW(UncertaintyFilterInto(m, {}, out), Error);
+  EXPECT_THROW(UncertaintyFilterInto(Row({1.0f}, 0.01f), o, out), Error);
 }
 
 }  // namespace

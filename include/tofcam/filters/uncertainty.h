@@ -58,4 +58,10 @@ struct UncertaintyOptions {
 [[nodiscard]] Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame,
                                                   const UncertaintyOptions& options = {});
 
+/// Same, into `out`: resized to the frame's size when it differs, then every pixel overwritten
+/// (kLowConfidence or nothing), so a per-frame loop allocates and zero-fills no image. `out`
+/// must not be one of the frame's channels. Errors as UncertaintyFilter.
+void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
+                           Image<PixelFlags>& out);
+
 }  // namespace tofcam

@@ -223,9 +223,10 @@ class Pipeline {
   std::unique_ptr<IntegrationTimeController> controller_;
   std::optional<TemporalFilter> temporal_;
   Image<float> smoothed_;
-  DenoisedChannels denoised_;   // the denoising's output, swapped into the frame
-  Image<PixelFlags> rejudged_;  // the accuracy threshold judged again (JudgeDeltaLAgain)
-  Frame compensated_;           // the scattering compensation's output, reused per frame
+  DenoisedChannels denoised_;    // the denoising's output, swapped into the frame
+  Image<PixelFlags> rejudged_;   // the accuracy threshold judged again (JudgeDeltaLAgain)
+  Image<PixelFlags> uncertain_;  // the uncertainty filter's flags (UncertaintyFilterInto)
+  Frame compensated_;            // the scattering compensation's output, reused per frame
   std::optional<FramePairCombiner> pair_;
   // HDR: the register the controller chose at the last base exposure, and whether the frame
   // being processed is the long one.
