@@ -167,9 +167,6 @@ TOFCAM_HOT_LOOP void PrepareRowShifted(int w, bool sums, const float* __restrict
 using internal::UseAvx512Forms;
 #endif
 
-// The strip form's band (FlyingPixelStrips16): the bytes of a band's rows, halo included.
-constexpr std::size_t kBandBytes = std::size_t{384} << 10;
-
 struct Thresholds {
   float contrast, floor_a, close, far, max_delta, avg_delta;
 };
@@ -403,6 +400,9 @@ TOFCAM_AVX512_INLINE Across16 NeutralAcross16() {
                   z,
                   0};
 }
+
+// The strip form's band (FlyingPixelStrips16): the bytes of a band's rows, halo included.
+constexpr std::size_t kBandBytes = std::size_t{384} << 10;
 
 // A strip step's pixels [i, i + 16) and which of them FlyingPixelStrips16 raised.
 struct RaisedLanes {
