@@ -176,7 +176,8 @@ struct Workspace {
   std::vector<MetricFrame> pan_frames;
   MetricFrame metric;
   Image<float> delta_l;
-  Image<PixelFlags> raised;  // filter output, reused (FilterSet::Process, ApplyFiltersInto)
+  // Filter output, reused (FilterSet::Process, ApplyFiltersInto, UncertaintyFilterInto).
+  Image<PixelFlags> raised;
   // One prepared filter set per filter row (key: the row's filter name), built for the rays.
   std::map<std::string, FilterSet> filter_sets;
   PanView pan_view;           // reused (MakePanViewInto), as a per-sweep loop does

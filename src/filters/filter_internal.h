@@ -70,8 +70,10 @@ void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior, cons
 // in as `out`.
 void JumpEdgeInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
                   const JumpLambdas& lambdas, Image<PixelFlags>& out, Image<PixelFlags>* echo);
-// `echo` as for JumpEdgeInto; it may be `prior`: row r's bits are written after the rows up to
-// r + 1 were read from prior, and the filter reads no row of prior twice.
+// `echo` as for JumpEdgeInto; it may be `prior`. The portable form writes row r's bits after it
+// has read the rows up to r + 1 from prior and reads no row of prior twice; the AVX-512 form
+// (column strips, which read their neighbours' columns and halo rows again) lists the raised
+// pixels and writes the echo after its last read.
 void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
                      const FlyingPixelOptions& o, Image<PixelFlags>& out,
                      Image<PixelFlags>* echo = nullptr);

@@ -23,9 +23,9 @@ namespace tofcam {
 namespace filters_internal {
 namespace {
 
-// The portable form (AVX-512 CPUs run FlyingPixelStrips16 instead, below): the test is split by
-// cost. The distance conditions need only the 3x3 minimum and maximum of
-// the distance (separable: a horizontal 3-min / 3-max per row, then three rows), evaluated for
+// The portable form (AVX-512 CPUs run FlyingPixelStrips16 instead, below): the test is split
+// by cost. The distance conditions need only the 3x3 minimum and maximum of the distance
+// (separable: a horizontal 3-min / 3-max per row, then three rows), evaluated for
 // every pixel in vectorised row loops. The amplitude contrast needs the window's count, sum and
 // sum of squares; it is evaluated only where the distance conditions hold (a few per cent of the
 // pixels: depth edges), in the same order of float operations as a full evaluation (horizontal
@@ -256,7 +256,7 @@ TOFCAM_HOT_LOOP std::uint32_t DecideRow(int w, const Thresholds& t, const float*
 // of row v that passed the distance conditions (for the next row's form). Its x86-64-v4 clone
 // (the AVX2 clone alone was no faster than DecideRow twice; the v4 clone took about 12 % less
 // time on noisy frames, filters_bench SR-2 30.3 against 34.5 us) runs on AVX-512 CPUs under the
-// test switch and where the intrinsics are compiled out.
+// test switch.
 TOFCAM_HOT_LOOP_WIDE std::uint32_t DecideTwoRows(
     int w, const Thresholds& t, const float* __restrict lu, const float* __restrict lm,
     const float* __restrict lv, const float* __restrict lx, const float* __restrict hu,
@@ -346,10 +346,10 @@ struct Across16 {
 // left / right neighbour lies in the image). The same flags as PrepareRowShifted's values give
 // (its pad and neutral lanes are the masked-out lanes here):
 // - the sums add the same terms in the same order, with masked adds where PrepareRowShifted
-//   adds an unusable pixel's 0 (x + 0 = x; only the sign of a zero sum can differ, and every
-//   test on a sum is blind to it: Contrast16 squares it or compares it with floor·n > 0);
-// - the 3-min / 3-max take the usable distances in another order, which can change only the
-//   sign of a zero (min(+0, -0)), and DistancePass16's tests are blind to that too;
+//   adds an unusable pixel's 0 (x + 0 = x; only the sign of a zero Σa can differ, and every
+//   test on Σa is blind to it: Contrast16 squares it, or squares max(floor·n, Σa));
+// - the 3-min / 3-max compare in PrepareRowShifted's order (left, then centre, then right:
+//   vminps(x, y) = x < y ? x : y), so they are the same values;
 // - vfpclassps finds NaN and ±inf in one operation (|x| < inf needs two).
 TOFCAM_AVX512_INLINE Across16 AcrossRow16(const float* d, const float* a, const PixelFlags* pf,
                                           __mmask16 in, __mmask16 left, __mmask16 right) {
@@ -598,7 +598,9 @@ void FlyingPixelInto(const MetricFrame& frame, const Image<PixelFlags>& prior,
   // there each row is a new page, where the hardware prefetcher starts again, and the loads of a
   // row's first blocks waited on memory (40 % of the row preparation at 1 MP in perf). The row
   // preparation then prefetches the next row. Smaller frames stay in L2 between calls, where the
-  // prefetches only cost (filters_bench: SR-2 about 2 % slower with them, VGA 12 % faster).
+  // prefetches only cost (filters_bench: SR-2 about 2 % slower with them, VGA 12 % faster;
+  // measured with the AVX-512 row preparation that FlyingPixelStrips16 replaced, not again for
+  // the portable one).
   const bool prefetch = static_cast<std::size_t>(w) * h * 10 > (std::size_t{1} << 19);
   // Row r into its slot; with_sums: its horizontal sums too (when the rows it will be decided
   // with are expected to have many candidates).

@@ -184,7 +184,7 @@ float RedoPixel(int c, double min_jump_sigma, double edge_fraction, const float*
 #if defined(TOFCAM_AVX512_FORMS)
 TOFCAM_AVX512_DIAGNOSTICS_BEGIN
 // ---------------------------------------------------------------------------------------------
-// UncertaintyFilter's AVX-512 form: the flags straight from the frame in one pass over rows
+// UncertaintyFilterInto's AVX-512 form: the flags straight from the frame in one pass over rows
 // (three padded rows in a ring instead of padded copies of the whole frame, no u image, no
 // separate flag pass), its tests in float, sixteen pixels at a time. Every decision equals the
 // double definition's: a float test decides only outside kFloatBand of its tie, and a pixel
@@ -378,7 +378,7 @@ TOFCAM_AVX512_TARGET std::uint32_t FlagRow16(
   return ties;
 }
 
-// UncertaintyFilter's AVX-512 form (FloatFormCovers(options), frame checked), into `out` (the
+// UncertaintyFilterInto's AVX-512 form (FloatFormCovers(options), frame checked), into `out` (the
 // frame's size; every pixel written).
 void UncertaintyFlags16(const MetricFrame& frame, const UncertaintyOptions& options,
                         Image<PixelFlags>& out) {

@@ -59,8 +59,10 @@ struct UncertaintyOptions {
                                                   const UncertaintyOptions& options = {});
 
 /// Same, into `out`: resized to the frame's size when it differs, then every pixel overwritten
-/// (kLowConfidence or nothing), so a per-frame loop allocates and zero-fills no image. `out`
-/// must not be one of the frame's channels. Errors as UncertaintyFilter.
+/// (kLowConfidence or nothing), so a per-frame loop allocates no output image (with the default
+/// options on AVX-512 CPUs nothing at all; elsewhere the u image of ComputeUncertainty is still
+/// made per call). `out` must not be one of the frame's channels. Throws as ComputeUncertainty,
+/// before `out` is touched.
 void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
                            Image<PixelFlags>& out);
 
