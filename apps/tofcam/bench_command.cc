@@ -65,6 +65,10 @@ struct BenchOptions {
   bool skip_simulator = false;
   bool skip_recording = false;
   bool peers_only = false;  // only the peer export (no stage timings)
+  // Only stages whose name contains one of these (empty: all), only these frame sizes
+  // ("160x124", "640x480", "1024x1024"; empty: all).
+  std::vector<std::string> stage_filters;
+  std::vector<std::string> sizes;
 };
 
 // The simulated frames of one resolution and everything the stages need besides.
@@ -835,6 +839,36 @@ void RunBench(const BenchOptions& o) {
     throw Error(ErrorCode::kInvalidArgument,
                 "--min-time-s must be in (0, 60], got " + std::to_string(o.min_time_s));
   }
+  std::vector<Stage> stages = MakeStages();
+  if (!o.stage_filters.empty()) {
+    std::string names;
+    for (const Stage& st : stages) names += (names.empty() ? "" : ", ") + st.name;
+    for (const std::string& f : o.stage_filters) {
+      if (std::none_of(stages.begin(), stages.end(),
+                       [&](const Stage& st) { return st.name.find(f) != std::string::npos; })) {
+        throw Error(ErrorCode::kInvalidArgument,
+                    "--stage '" + f + "' matches no stage (stages: " + names + ")");
+      }
+    }
+    std::erase_if(stages, [&](const Stage& st) {
+      return std::none_of(o.stage_filters.begin(), o.stage_filters.end(),
+                          [&](const std::string& f) { return st.name.find(f) != std::string::npos; });
+    });
+  }
+  const std::pair<int, int> all_sizes[] = {{160, 124}, {640, 480}, {1024, 1024}};
+  std::vector<std::pair<int, int>> sizes;
+  for (const auto& [w, h] : all_sizes) {
+    const std::string name = std::to_string(w) + "x" + std::to_string(h);
+    if (o.sizes.empty() || std::find(o.sizes.begin(), o.sizes.end(), name) != o.sizes.end()) {
+      sizes.emplace_back(w, h);
+    }
+  }
+  for (const std::string& z : o.sizes) {
+    if (z != "160x124" && z != "640x480" && z != "1024x1024") {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "--size must be 160x124, 640x480 or 1024x1024, got '" + z + "'");
+    }
+  }
   std::vector<int> thread_counts;
   if (o.threads != 2) thread_counts.push_back(1);
   if (o.threads != 1) thread_counts.push_back(2);
@@ -862,7 +896,6 @@ void RunBench(const BenchOptions& o) {
   progress("ΔL scale " + std::to_string(delta_l_scale));
   report["delta_l_scale"] = delta_l_scale;
 
-  const std::pair<int, int> sizes[] = {{160, 124}, {640, 480}, {1024, 1024}};
   std::vector<Input> inputs;
   for (const auto& [w, h] : sizes) {
     if (o.peers_only) break;
@@ -872,7 +905,6 @@ void RunBench(const BenchOptions& o) {
   }
 
   std::vector<Row> rows;
-  const std::vector<Stage> stages = MakeStages();
   double max_bpp = 0;
   for (const Stage& s : stages) max_bpp = std::max(max_bpp, s.bytes_per_pixel);
   for (const Input& in : inputs) {
@@ -967,7 +999,7 @@ void RunBench(const BenchOptions& o) {
     peers["controller_trajectory"] = trajectory;
     peers["delta_l_scale"] = delta_l_scale;
     std::vector<Input> peer_inputs;
-    for (const auto& [w, h] : sizes) {
+    for (const auto& [w, h] : all_sizes) {
       if (w * h > 640 * 480) continue;  // peers take seconds per megapixel frame
       peer_inputs.push_back(MakeInput(w, h, o.frames, delta_l_scale, reg));
     }
@@ -1069,6 +1101,10 @@ void SetupBenchCommand(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--export-peers", opts->export_peers_dir,
                   "Also write clouds and tofcam filter results for bench/peers to this folder");
+  sub->add_option("--stage", opts->stage_filters,
+                  "Only stages whose name contains this text (repeatable; default: all)");
+  sub->add_option("--size", opts->sizes,
+                  "Only this frame size: 160x124, 640x480 or 1024x1024 (repeatable; default: all)");
   sub->add_flag("--no-simulator", opts->skip_simulator, "Skip the simulator frames/s");
   sub->add_flag("--no-recording", opts->skip_recording, "Skip the recording write/read");
   sub->add_flag("--peers-only", opts->peers_only,

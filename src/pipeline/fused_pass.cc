@@ -67,23 +67,28 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   }
   if (s.cloud != nullptr) kernels::PrepareCloud(m, *s.rays, *out.cloud);
 
-  // The stages run one after the other, directly on the frame's buffers: over the whole frame,
-  // except when the pass makes a cloud large enough to be streamed past the caches
-  // (kStreamCloudBytes, CloudSpan). Then they run over chunks of kChunkPixels (16K), so that a
-  // chunk's channels stay in the core's L2 from one stage to the next, and the streamed cloud
-  // saves the reads of its output lines. At 1 MP that took the chain from a median 1.60x its
-  // memcpy floor to 1.40x (pipeline_bench, ten interleaved runs each, on a machine with a busy
-  // second core; docs/benchmarks.md). Either alone was measured no faster: without streaming the
-  // cloud's stores read every output line from memory first; without chunks the streamed
-  // channels are read back from memory. Streaming the metric frame too (computed in an L2
-  // scratch) was slower: median 1.57x. Chunks at VGA were measured up to 12 % slower (there the
-  // channels stay in the L3 anyway), so other frames run in one piece. Chunks of 2^15-2^16
-  // pixels measured the same as 2^14; 16K keeps a chunk's working set (about 40 bytes a pixel)
-  // within a smaller L2 too.
+  // The stages run one after the other over chunks of the frame, directly on the frame's
+  // buffers, so that a chunk's channels are still in a cache when the next stage reads them.
+  // - Frames whose cloud is large enough to be streamed past the caches (kStreamCloudBytes,
+  //   CloudSpan) run in chunks of kChunkPixels (16K): a chunk's channels stay in the core's L2,
+  //   and the streamed cloud saves the reads of its output lines. At 1 MP that took the chain
+  //   from a median 1.60x its memcpy floor to 1.40x (pipeline_bench, ten interleaved runs each,
+  //   on a machine with a busy second core; docs/benchmarks.md). Either alone was measured no
+  //   faster: without streaming the cloud's stores read every output line from memory first;
+  //   without chunks the streamed channels are read back from memory. Streaming the metric
+  //   frame too (computed in an L2 scratch) was slower: median 1.57x. Chunks of 2^15-2^16
+  //   pixels measured the same as 2^14, and 1K-4K the same within the noise (an Intel Xeon with
+  //   a 2 MiB L2).
+  // - Other frames run in chunks of kCacheChunkPixels (1K), whose channels stay in L1. At
+  //   640x480, where the whole frame's channels (20 MB) overflow the L2, the chain took
+  //   1.19-1.20 ms against 1.44-1.53 ms in one piece (the Intel Xeon, pipeline_bench, two
+  //   alternated rounds; 512 and 2K pixels 1.19-1.23 ms, 4K 1.25-1.31 ms); at SR-2 45.5-47.0
+  //   against 48.1-48.6 us. (Chunks of 16K at VGA had been measured up to 12 % slower than one
+  //   piece on a Zen 5: they leave the channels in L2, which the L3 served as well.)
   const std::size_t n = m.radial_distance_m.size();
   const bool streamed_cloud =
       s.cloud != nullptr && n * kernels::kCloudBytesPerPoint >= kernels::kStreamCloudBytes;
-  const std::size_t chunk = streamed_cloud ? kernels::kChunkPixels : n;
+  const std::size_t chunk = streamed_cloud ? kernels::kChunkPixels : kernels::kCacheChunkPixels;
   const bool intensity = m.has_intensity();
   const bool accuracy = s.accuracy != nullptr;
   float* d = m.radial_distance_m.data();

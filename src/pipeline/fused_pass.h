@@ -2,11 +2,11 @@
 // The per-pixel pass shared by PaperChain and Pipeline: stage 1 (metric conversion), stage 2
 // (eq. 1 + the dense distance table), stage 3 (ΔL), the per-pixel filters and, optionally,
 // stage 6 (the point cloud), straight into the caller's reused buffers (no allocation once
-// their sizes are stable). The stages run one after the other over the whole frame, or over
-// chunks of kernels::kChunkPixels when the pass makes a streamed cloud; the results are those
-// of the stage functions called one after the other on the whole frame, bit for bit, since
-// each chunk runs the very same loops (src/pipeline/stage_kernels.h). fused_pass.cc explains
-// when and why.
+// their sizes are stable). The stages run one after the other over chunks of the frame
+// (kernels::kCacheChunkPixels, or kernels::kChunkPixels when the pass makes a streamed cloud);
+// the results are those of the stage functions called one after the other on the whole
+// frame, bit for bit, since each chunk runs the very same loops (src/pipeline/stage_kernels.h).
+// fused_pass.cc explains the chunk sizes.
 // Not installed.
 
 #include <optional>

@@ -17,9 +17,12 @@
 
 namespace tofcam::kernels {
 
-// Pixels per chunk of the fused pass when it makes a streamed cloud (kStreamCloudBytes); other
-// frames run in one piece (src/pipeline/fused_pass.cc explains both).
+// Pixels per chunk of the fused pass when it makes a streamed cloud (kStreamCloudBytes).
 inline constexpr std::size_t kChunkPixels = std::size_t{1} << 14;
+// Pixels per chunk of the fused pass otherwise: a chunk's channels (about 66 bytes a pixel with
+// the inputs, rays and cloud) stay in a 48-64 KiB L1 from one stage to the next
+// (src/pipeline/fused_pass.cc explains both sizes).
+inline constexpr std::size_t kCacheChunkPixels = std::size_t{1} << 10;
 
 // dst[i] |= src[i] for i in [0, n); dst and src do not overlap.
 void OrFlags(std::size_t n, PixelFlags* dst, const PixelFlags* src);

@@ -136,10 +136,13 @@ void ExpectSameCloud(const PointCloud& a, const PointCloud& b) {
 }
 
 TEST(PaperChainTest, EqualsTheStagesCalledOneByOne) {
-  // 1100 x 960 pixels: a cloud large enough to be streamed (kernels::kStreamCloudBytes), so the
-  // pass runs in chunks of 2^14 pixels (64 and a partial one).
-  for (const auto& [w, h] :
-       {std::pair{160, 124}, std::pair{157, 123}, std::pair{700, 3}, std::pair{1100, 960}}) {
+  // The other frames run in chunks of kernels::kCacheChunkPixels (1024): 31 x 17 in one partial
+  // chunk, 700 x 3 in two and a partial one, 157 x 123 ending in a chunk of 879 pixels (not a
+  // multiple of 16). 1100 x 960 pixels: a cloud large enough to be streamed
+  // (kernels::kStreamCloudBytes), so the pass runs in chunks of 2^14 pixels (64 and a partial
+  // one).
+  for (const auto& [w, h] : {std::pair{160, 124}, std::pair{157, 123}, std::pair{31, 17},
+                             std::pair{700, 3}, std::pair{1100, 960}}) {
     for (const bool table : {false, true}) {
       for (const bool intensity : {true, false}) {
         SCOPED_TRACE(std::to_string(w) + "x" + std::to_string(h) + (table ? " table" : "") +
