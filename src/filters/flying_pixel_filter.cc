@@ -351,6 +351,16 @@ struct Across16 {
 // - the 3-min / 3-max compare in PrepareRowShifted's order (left, then centre, then right:
 //   vminps(x, y) = x < y ? x : y), so they are the same values;
 // - vfpclassps finds NaN and ±inf in one operation (|x| < inf needs two).
+// The address one element before p, for a masked load whose lane 0 is off at column 0. At the
+// image's first pixel `p - 1` would point before the image: undefined behaviour in C++ even if
+// never read. Integer arithmetic on the address is not (the conversion back is GCC's documented
+// implementation-defined mapping, which these intrinsics rely on anyway), and the masked load
+// never touches the element.
+template <typename T>
+TOFCAM_AVX512_INLINE const T* OneBefore(const T* p) {
+  return reinterpret_cast<const T*>(reinterpret_cast<std::uintptr_t>(p) - sizeof(T));
+}
+
 TOFCAM_AVX512_INLINE Across16 AcrossRow16(const float* d, const float* a, const PixelFlags* pf,
                                           __mmask16 in, __mmask16 left, __mmask16 right) {
   constexpr int kNonFinite = 0x01 | 0x08 | 0x10 | 0x80;  // QNaN, +inf, -inf, SNaN
@@ -361,11 +371,11 @@ TOFCAM_AVX512_INLINE Across16 AcrossRow16(const float* d, const float* a, const 
     return static_cast<__mmask16>(
         ok & ~(_mm512_fpclass_ps_mask(dv, kNonFinite) | _mm512_fpclass_ps_mask(av, kNonFinite)));
   };
-  const __m512 dl = _mm512_maskz_loadu_ps(left, d - 1), dc = _mm512_maskz_loadu_ps(in, d);
+  const __m512 dl = _mm512_maskz_loadu_ps(left, OneBefore(d)), dc = _mm512_maskz_loadu_ps(in, d);
   const __m512 dr = _mm512_maskz_loadu_ps(right, d + 1);
-  const __m512 al = _mm512_maskz_loadu_ps(left, a - 1), ac = _mm512_maskz_loadu_ps(in, a);
+  const __m512 al = _mm512_maskz_loadu_ps(left, OneBefore(a)), ac = _mm512_maskz_loadu_ps(in, a);
   const __m512 ar = _mm512_maskz_loadu_ps(right, a + 1);
-  const __mmask16 ul = usable(left, dl, al, pf - 1);
+  const __mmask16 ul = usable(left, dl, al, OneBefore(pf));
   const __mmask16 uc = usable(in, dc, ac, pf);
   const __mmask16 ur = usable(right, dr, ar, pf + 1);
   const __m512 one = _mm512_set1_ps(1.0f);
