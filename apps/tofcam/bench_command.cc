@@ -851,8 +851,9 @@ void RunBench(const BenchOptions& o) {
       }
     }
     std::erase_if(stages, [&](const Stage& st) {
-      return std::none_of(o.stage_filters.begin(), o.stage_filters.end(),
-                          [&](const std::string& f) { return st.name.find(f) != std::string::npos; });
+      return std::none_of(
+          o.stage_filters.begin(), o.stage_filters.end(),
+          [&](const std::string& f) { return st.name.find(f) != std::string::npos; });
     });
   }
   const std::pair<int, int> all_sizes[] = {{160, 124}, {640, 480}, {1024, 1024}};
