@@ -7,6 +7,7 @@
 // concurrently (each thread owns its inputs and outputs); it is reported as wall time per frame.
 // Each figure is the median of 5 batches (robust against other processes on a shared machine).
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -839,21 +840,36 @@ void RunBench(const BenchOptions& o) {
     throw Error(ErrorCode::kInvalidArgument,
                 "--min-time-s must be in (0, 60], got " + std::to_string(o.min_time_s));
   }
+  for (const std::string& z : o.sizes) {
+    if (z != "160x124" && z != "640x480" && z != "1024x1024") {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "--size must be 160x124, 640x480 or 1024x1024, got '" + z + "'");
+    }
+  }
+  // --stage: the stage rows whose name contains one of the texts, ignoring case; the memory
+  // bandwidth, recording and simulator rows are not stages and are left out then.
   std::vector<Stage> stages = MakeStages();
-  if (!o.stage_filters.empty()) {
+  const bool stages_only = !o.stage_filters.empty();
+  if (stages_only) {
+    const auto lower = [](std::string t) {
+      for (char& ch : t) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+      return t;
+    };
+    const auto matches = [&](const Stage& st, const std::string& text) {
+      return lower(st.name).find(lower(text)) != std::string::npos;
+    };
     std::string names;
     for (const Stage& st : stages) names += (names.empty() ? "" : ", ") + st.name;
-    for (const std::string& f : o.stage_filters) {
+    for (const std::string& text : o.stage_filters) {
       if (std::none_of(stages.begin(), stages.end(),
-                       [&](const Stage& st) { return st.name.find(f) != std::string::npos; })) {
+                       [&](const Stage& st) { return matches(st, text); })) {
         throw Error(ErrorCode::kInvalidArgument,
-                    "--stage '" + f + "' matches no stage (stages: " + names + ")");
+                    "--stage '" + text + "' matches no stage (stages: " + names + ")");
       }
     }
     std::erase_if(stages, [&](const Stage& st) {
-      return std::none_of(
-          o.stage_filters.begin(), o.stage_filters.end(),
-          [&](const std::string& f) { return st.name.find(f) != std::string::npos; });
+      return std::none_of(o.stage_filters.begin(), o.stage_filters.end(),
+                          [&](const std::string& text) { return matches(st, text); });
     });
   }
   const std::pair<int, int> all_sizes[] = {{160, 124}, {640, 480}, {1024, 1024}};
@@ -862,12 +878,6 @@ void RunBench(const BenchOptions& o) {
     const std::string name = std::to_string(w) + "x" + std::to_string(h);
     if (o.sizes.empty() || std::find(o.sizes.begin(), o.sizes.end(), name) != o.sizes.end()) {
       sizes.emplace_back(w, h);
-    }
-  }
-  for (const std::string& z : o.sizes) {
-    if (z != "160x124" && z != "640x480" && z != "1024x1024") {
-      throw Error(ErrorCode::kInvalidArgument,
-                  "--size must be 160x124, 640x480 or 1024x1024, got '" + z + "'");
     }
   }
   std::vector<int> thread_counts;
@@ -882,7 +892,7 @@ void RunBench(const BenchOptions& o) {
   report["min_time_s"] = o.min_time_s;
 
   // Memory bandwidth: a 256 MiB memcpy (read + write counted).
-  if (!o.peers_only) {
+  if (!o.peers_only && !stages_only) {
     constexpr std::size_t kBytes = std::size_t{256} << 20;
     std::vector<Workspace> ws(2);
     for (auto& w : ws) w.copy.Ensure(kBytes);
@@ -944,7 +954,7 @@ void RunBench(const BenchOptions& o) {
         rows.push_back(r);
       }
     }
-    if (!o.skip_recording) {
+    if (!o.skip_recording && !stages_only) {
       const std::filesystem::path dir = std::filesystem::temp_directory_path();
       RecordingOptions def;
       RecordingOptions raw;
@@ -963,7 +973,7 @@ void RunBench(const BenchOptions& o) {
   }
 
   std::vector<SimRow> sim_rows;
-  if (!o.skip_simulator && !o.peers_only) {
+  if (!o.skip_simulator && !o.peers_only && !stages_only) {
     progress("simulator");
     const double t = std::max(o.min_time_s * 4, 1.0);
     for (int th : thread_counts) {
@@ -1103,7 +1113,8 @@ void SetupBenchCommand(CLI::App& app) {
   sub->add_option("--export-peers", opts->export_peers_dir,
                   "Also write clouds and tofcam filter results for bench/peers to this folder");
   sub->add_option("--stage", opts->stage_filters,
-                  "Only stages whose name contains this text (repeatable; default: all)");
+                  "Only the stage rows whose name contains this text, any case (repeatable; "
+                  "leaves out the bandwidth, recording and simulator rows)");
   sub->add_option("--size", opts->sizes,
                   "Only this frame size: 160x124, 640x480 or 1024x1024 (repeatable; default: all)");
   sub->add_flag("--no-simulator", opts->skip_simulator, "Skip the simulator frames/s");

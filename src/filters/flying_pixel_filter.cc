@@ -342,15 +342,6 @@ struct Across16 {
   __mmask16 usable;
 };
 
-// Row r's Across16 for columns [c0, c0 + 16) (lanes in `in`; `left` / `right` the lanes whose
-// left / right neighbour lies in the image). The same flags as PrepareRowShifted's values give
-// (its pad and neutral lanes are the masked-out lanes here):
-// - the sums add the same terms in the same order, with masked adds where PrepareRowShifted
-//   adds an unusable pixel's 0 (x + 0 = x; only the sign of a zero Σa can differ, and every
-//   test on Σa is blind to it: Contrast16 squares it, or squares max(floor·n, Σa));
-// - the 3-min / 3-max compare in PrepareRowShifted's order (left, then centre, then right:
-//   vminps(x, y) = x < y ? x : y), so they are the same values;
-// - vfpclassps finds NaN and ±inf in one operation (|x| < inf needs two).
 // The address one element before p, for a masked load whose lane 0 is off at column 0. At the
 // image's first pixel `p - 1` would point before the image: undefined behaviour in C++ even if
 // never read. Integer arithmetic on the address is not (the conversion back is GCC's documented
@@ -361,6 +352,15 @@ TOFCAM_AVX512_INLINE const T* OneBefore(const T* p) {
   return reinterpret_cast<const T*>(reinterpret_cast<std::uintptr_t>(p) - sizeof(T));
 }
 
+// Row r's Across16 for columns [c0, c0 + 16) (lanes in `in`; `left` / `right` the lanes whose
+// left / right neighbour lies in the image). The same flags as PrepareRowShifted's values give
+// (its pad and neutral lanes are the masked-out lanes here):
+// - the sums add the same terms in the same order, with masked adds where PrepareRowShifted
+//   adds an unusable pixel's 0 (x + 0 = x; only the sign of a zero Σa can differ, and every
+//   test on Σa is blind to it: Contrast16 squares it, or squares max(floor·n, Σa));
+// - the 3-min / 3-max compare in PrepareRowShifted's order (left, then centre, then right:
+//   vminps(x, y) = x < y ? x : y), so they are the same values;
+// - vfpclassps finds NaN and ±inf in one operation (|x| < inf needs two).
 TOFCAM_AVX512_INLINE Across16 AcrossRow16(const float* d, const float* a, const PixelFlags* pf,
                                           __mmask16 in, __mmask16 left, __mmask16 right) {
   constexpr int kNonFinite = 0x01 | 0x08 | 0x10 | 0x80;  // QNaN, +inf, -inf, SNaN

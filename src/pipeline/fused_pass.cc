@@ -1,8 +1,10 @@
 #include "fused_pass.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <string>
 
 #include "../calibration/calibration_kernel.h"
@@ -39,6 +41,42 @@ std::optional<DenseDistanceCorrection> PrepareTable(
                                            UnambiguousRangeM(camera.modulation_frequency_hz));
 }
 
+namespace {
+// ForceCacheChunkForTesting's value; 0: the CPU's default.
+std::atomic<std::size_t> forced_cache_chunk{0};
+
+// Intel CPUs: kernels::kCacheChunkPixels; others: whole frames. On an Intel Xeon (2 MiB L2,
+// docs/benchmarks.md, eighth session of 2026-11-27) 1K-pixel chunks, in which the channels handed
+// from stage to stage (about 18 bytes a pixel) stay in L1, took the 640x480 chain from 1.44-1.53
+// to 1.19-1.20 ms and SR-2 from 48.1-48.6 to 45.5-47.0 us (pipeline_bench, two alternated
+// rounds; 512 and 2K pixels 1.19-1.23 ms, 4K 1.25-1.31 ms). On the AMD Zen machines of earlier
+// sessions, chunks made it slower: 2^12 and 2^14 pixels 20-35 % at 640x480 and 6-33 % at 1 MP,
+// SR-2 no faster (a Zen 4, third session of 2026-11-25); 16K up to 12 % at 640x480 (a Zen 4,
+// fourth session of 2026-11-26). 1K chunks were not measured there, so those CPUs keep whole
+// frames. The results are the same bit for bit either way.
+bool ChunksPay() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_cpu_init();
+  return __builtin_cpu_is("intel") != 0;
+#else
+  return false;
+#endif
+}
+
+}  // namespace
+
+std::size_t CacheChunkPixels() {
+  const std::size_t forced = forced_cache_chunk.load(std::memory_order_relaxed);
+  if (forced != 0) return forced;
+  static const std::size_t chunk =
+      ChunksPay() ? kernels::kCacheChunkPixels : std::numeric_limits<std::size_t>::max();
+  return chunk;
+}
+
+void ForceCacheChunkForTesting(std::size_t pixels) {
+  forced_cache_chunk.store(pixels, std::memory_order_relaxed);
+}
+
 void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& out) {
   MetricFrame& m = *out.frame;
   // Every check and buffer sizing first, in the order the stage functions do them.
@@ -68,7 +106,7 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   if (s.cloud != nullptr) kernels::PrepareCloud(m, *s.rays, *out.cloud);
 
   // The stages run one after the other over chunks of the frame, directly on the frame's
-  // buffers, so that a chunk's channels are still in a cache when the next stage reads them.
+  // buffers, so that what one stage writes is still in a cache when the next stage reads it.
   // - Frames whose cloud is large enough to be streamed past the caches (kStreamCloudBytes,
   //   CloudSpan) run in chunks of kChunkPixels (16K): a chunk's channels stay in the core's L2,
   //   and the streamed cloud saves the reads of its output lines. At 1 MP that took the chain
@@ -77,18 +115,13 @@ void RunFusedPass(const Frame& frame, const FusedStages& s, const FusedOutputs& 
   //   faster: without streaming the cloud's stores read every output line from memory first;
   //   without chunks the streamed channels are read back from memory. Streaming the metric
   //   frame too (computed in an L2 scratch) was slower: median 1.57x. Chunks of 2^15-2^16
-  //   pixels measured the same as 2^14, and 1K-4K the same within the noise (an Intel Xeon with
-  //   a 2 MiB L2).
-  // - Other frames run in chunks of kCacheChunkPixels (1K), whose channels stay in L1. At
-  //   640x480, where the whole frame's channels (20 MB) overflow the L2, the chain took
-  //   1.19-1.20 ms against 1.44-1.53 ms in one piece (the Intel Xeon, pipeline_bench, two
-  //   alternated rounds; 512 and 2K pixels 1.19-1.23 ms, 4K 1.25-1.31 ms); at SR-2 45.5-47.0
-  //   against 48.1-48.6 us. (Chunks of 16K at VGA had been measured up to 12 % slower than one
-  //   piece on a Zen 5: they leave the channels in L2, which the L3 served as well.)
+  //   pixels measured the same as 2^14 (and, on the Intel Xeon below, 1K-4K too).
+  // - Other frames: CacheChunkPixels().
   const std::size_t n = m.radial_distance_m.size();
   const bool streamed_cloud =
       s.cloud != nullptr && n * kernels::kCloudBytesPerPoint >= kernels::kStreamCloudBytes;
-  const std::size_t chunk = streamed_cloud ? kernels::kChunkPixels : kernels::kCacheChunkPixels;
+  const std::size_t chunk =
+      streamed_cloud ? kernels::kChunkPixels : std::min(CacheChunkPixels(), n);
   const bool intensity = m.has_intensity();
   const bool accuracy = s.accuracy != nullptr;
   float* d = m.radial_distance_m.data();

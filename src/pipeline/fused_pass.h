@@ -3,12 +3,13 @@
 // (eq. 1 + the dense distance table), stage 3 (ΔL), the per-pixel filters and, optionally,
 // stage 6 (the point cloud), straight into the caller's reused buffers (no allocation once
 // their sizes are stable). The stages run one after the other over chunks of the frame
-// (kernels::kCacheChunkPixels, or kernels::kChunkPixels when the pass makes a streamed cloud);
+// (CacheChunkPixels(), or kernels::kChunkPixels when the pass makes a streamed cloud);
 // the results are those of the stage functions called one after the other on the whole
 // frame, bit for bit, since each chunk runs the very same loops (src/pipeline/stage_kernels.h).
 // fused_pass.cc explains the chunk sizes.
 // Not installed.
 
+#include <cstddef>
 #include <optional>
 
 #include "tofcam/accuracy/delta_l.h"
@@ -44,6 +45,14 @@ struct FusedOutputs {
 
 // Runs the pass. Throws like the stage functions (checks happen before any pixel is written).
 void RunFusedPass(const Frame& frame, const FusedStages& stages, const FusedOutputs& out);
+
+// Pixels per chunk of a pass without a streamed cloud: kernels::kCacheChunkPixels on Intel CPUs,
+// SIZE_MAX (the whole frame) on others, decided once (fused_pass.cc gives the measurements).
+[[nodiscard]] std::size_t CacheChunkPixels();
+
+// Tests only: CacheChunkPixels() returns `pixels` (> 0; SIZE_MAX: whole frames) until called
+// with 0. Any chunking gives the same results; this lets one machine run every form.
+void ForceCacheChunkForTesting(std::size_t pixels);
 
 // Error(kMismatch) naming the field unless the calibration was made for this camera.
 void CheckCalibrationFits(const OffsetCalibration& c, const CameraInfo& camera);

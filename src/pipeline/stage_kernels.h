@@ -19,9 +19,11 @@ namespace tofcam::kernels {
 
 // Pixels per chunk of the fused pass when it makes a streamed cloud (kStreamCloudBytes).
 inline constexpr std::size_t kChunkPixels = std::size_t{1} << 14;
-// Pixels per chunk of the fused pass otherwise: a chunk's channels (about 66 bytes a pixel with
-// the inputs, rays and cloud) stay in a 48-64 KiB L1 from one stage to the next
-// (src/pipeline/fused_pass.cc explains both sizes).
+// Pixels per chunk of the fused pass otherwise, on CPUs where chunks pay
+// (pipeline_internal::CacheChunkPixels): the channels one stage hands to the next (distance,
+// amplitude, intensity, ΔL, flags: about 18 KiB) stay in L1; the chunk's whole working set
+// (about 66 bytes a pixel with the inputs, rays and cloud) in L2. src/pipeline/fused_pass.cc
+// gives the measurements.
 inline constexpr std::size_t kCacheChunkPixels = std::size_t{1} << 10;
 
 // dst[i] |= src[i] for i in [0, n); dst and src do not overlap.

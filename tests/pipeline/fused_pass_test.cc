@@ -1,14 +1,19 @@
 // The per-pixel pass of PaperChain and Pipeline::Process against the stage functions called one
 // after the other on the whole frame: the expectation is that composition, and the results must
 // agree bit for bit (the same loops, run chunk by chunk into reused buffers).
+#include "pipeline/fused_pass.h"  // internal: the chunk switch (src/pipeline)
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
+#include <utility>
 #include <vector>
 
 #include "../filters/test_scene.h"
+#include "pipeline/stage_kernels.h"  // internal: kernels::kCacheChunkPixels
 #include "tofcam/accuracy/delta_l.h"
 #include "tofcam/calibration/offset_calibration.h"
 #include "tofcam/cloud/point_cloud.h"
@@ -23,6 +28,18 @@
 
 namespace tofcam {
 namespace {
+
+constexpr std::size_t kWholeFrame = std::numeric_limits<std::size_t>::max();
+
+// The fused pass runs frames without a streamed cloud in chunks of `pixels` (0: the CPU's
+// choice, pipeline_internal::CacheChunkPixels) while the guard lives.
+class ForcedChunk {
+ public:
+  explicit ForcedChunk(std::size_t pixels) { pipeline_internal::ForceCacheChunkForTesting(pixels); }
+  ~ForcedChunk() { pipeline_internal::ForceCacheChunkForTesting(0); }
+  ForcedChunk(const ForcedChunk&) = delete;
+  ForcedChunk& operator=(const ForcedChunk&) = delete;
+};
 
 // SR-2 optics scaled to w x h (odd sizes leave partial blocks and vector tails).
 CameraInfo Camera(int w, int h) {
@@ -136,39 +153,44 @@ void ExpectSameCloud(const PointCloud& a, const PointCloud& b) {
 }
 
 TEST(PaperChainTest, EqualsTheStagesCalledOneByOne) {
-  // The other frames run in chunks of kernels::kCacheChunkPixels (1024): 31 x 17 in one partial
-  // chunk, 700 x 3 in two and a partial one, 157 x 123 ending in a chunk of 879 pixels (not a
-  // multiple of 16). 1100 x 960 pixels: a cloud large enough to be streamed
-  // (kernels::kStreamCloudBytes), so the pass runs in chunks of 2^14 pixels (64 and a partial
-  // one).
+  // Frames without a streamed cloud run whole or in chunks, by CPU (CacheChunkPixels); each is
+  // run here in every form: whole, in chunks of kernels::kCacheChunkPixels (1024: 31 x 17 in one
+  // partial chunk, 700 x 3 in two and a partial one, 157 x 123 ending in a chunk of 879 pixels,
+  // not a multiple of 16) and in chunks of 7 (every chunk a tail for the vector loops).
+  // 1100 x 960 pixels: a cloud large enough to be streamed (kernels::kStreamCloudBytes), so the
+  // pass runs in chunks of 2^14 pixels (64 and a partial one) whatever the CPU.
   for (const auto& [w, h] : {std::pair{160, 124}, std::pair{157, 123}, std::pair{31, 17},
                              std::pair{700, 3}, std::pair{1100, 960}}) {
-    for (const bool table : {false, true}) {
-      for (const bool intensity : {true, false}) {
-        SCOPED_TRACE(std::to_string(w) + "x" + std::to_string(h) + (table ? " table" : "") +
-                     (intensity ? "" : " no intensity"));
-        const CameraInfo info = Camera(w, h);
-        PaperChainOptions o;
-        o.calibration = Calibration(info, table);
-        o.threshold.max_delta_l_m = 0.05;
-        PaperChain chain(o, info);
-        MetricFrame out;
-        PointCloud cloud;
-        for (std::uint32_t seed : {1u, 2u}) {  // the second frame reuses the buffers
-          const Frame f = SceneFrame(info, seed, intensity);
-          chain.Process(f, out, cloud);
-          MetricFrame m;
-          ConvertToMetricInto(f, {}, m);
-          ApplyCalibrationInPlace(m, *o.calibration);
-          ComputeDeltaLInto(m, o.accuracy, m.delta_l_m);
-          MergeFlags(m, AccuracyThresholdFilter(m, o.threshold));
-          const PointCloud expected = MakePointCloud(m, chain.rays(), o.cloud);
-          ExpectSameFrame(out, m);
-          ExpectSameCloud(cloud, expected);
-          std::size_t high = 0;
-          for (PixelFlags p : m.flags.pixels()) high += p.Has(Flag::kHighDeltaL) ? 1 : 0;
-          EXPECT_GT(high, 0u);
-          EXPECT_LT(high, m.flags.size());
+    for (const std::size_t chunk : {kWholeFrame, kernels::kCacheChunkPixels, std::size_t{7}}) {
+      if (w == 1100 && chunk != kWholeFrame) continue;
+      const ForcedChunk forced(chunk);
+      for (const bool table : {false, true}) {
+        for (const bool intensity : {true, false}) {
+          SCOPED_TRACE(std::to_string(w) + "x" + std::to_string(h) + (table ? " table" : "") +
+                       (intensity ? "" : " no intensity") + " chunk " + std::to_string(chunk));
+          const CameraInfo info = Camera(w, h);
+          PaperChainOptions o;
+          o.calibration = Calibration(info, table);
+          o.threshold.max_delta_l_m = 0.05;
+          PaperChain chain(o, info);
+          MetricFrame out;
+          PointCloud cloud;
+          for (std::uint32_t seed : {1u, 2u}) {  // the second frame reuses the buffers
+            const Frame f = SceneFrame(info, seed, intensity);
+            chain.Process(f, out, cloud);
+            MetricFrame m;
+            ConvertToMetricInto(f, {}, m);
+            ApplyCalibrationInPlace(m, *o.calibration);
+            ComputeDeltaLInto(m, o.accuracy, m.delta_l_m);
+            MergeFlags(m, AccuracyThresholdFilter(m, o.threshold));
+            const PointCloud expected = MakePointCloud(m, chain.rays(), o.cloud);
+            ExpectSameFrame(out, m);
+            ExpectSameCloud(cloud, expected);
+            std::size_t high = 0;
+            for (PixelFlags p : m.flags.pixels()) high += p.Has(Flag::kHighDeltaL) ? 1 : 0;
+            EXPECT_GT(high, 0u);
+            EXPECT_LT(high, m.flags.size());
+          }
         }
       }
     }
@@ -228,8 +250,14 @@ PipelineResult ReferenceProcess(const PipelineOptions& o, const RayTable& rays,
 }
 
 TEST(PipelineFusedTest, ProcessEqualsTheStagesCalledOneByOne) {
-  for (const int set : {0, 1, 2, 3}) {  // defaults, all filters, neighbourhood only, large
-    SCOPED_TRACE(set);
+  // Sets 0-2 in every chunking (PaperChainTest says why), set 3 in the CPU's own (chunk 0).
+  for (const auto& [set, chunk] :
+       {std::pair{0, kWholeFrame}, std::pair{1, kWholeFrame}, std::pair{2, kWholeFrame},
+        std::pair{0, kernels::kCacheChunkPixels}, std::pair{1, kernels::kCacheChunkPixels},
+        std::pair{2, kernels::kCacheChunkPixels}, std::pair{0, std::size_t{7}},
+        std::pair{1, std::size_t{7}}, std::pair{2, std::size_t{7}}, std::pair{3, std::size_t{0}}}) {
+    const ForcedChunk forced(chunk);
+    SCOPED_TRACE(std::to_string(set) + " chunk " + std::to_string(chunk));
     // Set 3: the defaults on a larger frame, accuracy off.
     const CameraInfo info = set == 3 ? Camera(1031, 517) : Camera(157, 123);
     PipelineOptions o;

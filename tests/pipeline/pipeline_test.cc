@@ -875,12 +875,13 @@ TEST_F(RunCommandTest, BadOptionsFailWithClearErrors) {
             ExitStatus(ErrorCode::kNotFound));
 }
 
-// `tofcam bench --stage TEXT --size WxH` times only the rows asked for; a text that matches no
-// stage or a size that is not one of the three is refused before any work.
+// `tofcam bench --stage TEXT --size WxH` times only the stage rows asked for (the text in any
+// case; no bandwidth, recording or simulator rows); a text that matches no stage or a size that
+// is not one of the three is refused before any work.
 TEST_F(RunCommandTest, BenchRunsOnlyTheStagesAndSizesAskedFor) {
   std::string out;
-  ASSERT_EQ(Run("bench --stage \"false colour\" --size 160x124 --threads 1 --frames 1 "
-                "--min-time-s 0.01 --no-simulator --no-recording --json",
+  ASSERT_EQ(Run("bench --stage \"FALSE Colour\" --size 160x124 --threads 1 --frames 1 "
+                "--min-time-s 0.01 --json",
                 &out),
             0)
       << Stderr();
@@ -893,11 +894,15 @@ TEST_F(RunCommandTest, BenchRunsOnlyTheStagesAndSizesAskedFor) {
   EXPECT_NE(out.find("\"stage\": \"false colour\""), std::string::npos) << out;
   EXPECT_NE(out.find("\"resolution\": \"160x124\""), std::string::npos) << out;
   EXPECT_EQ(out.find("640x480"), std::string::npos) << out;
+  EXPECT_EQ(out.find("memory_bandwidth"), std::string::npos) << out;
+  EXPECT_NE(out.find("\"simulator\": []"), std::string::npos) << out;
   const int invalid = ExitStatus(ErrorCode::kInvalidArgument);
-  EXPECT_EQ(Run("bench --stage nosuchstage --no-simulator"), invalid);
+  EXPECT_EQ(Run("bench --stage nosuchstage"), invalid);
   EXPECT_NE(Stderr().find("'nosuchstage' matches no stage"), std::string::npos) << Stderr();
-  EXPECT_EQ(Run("bench --size 320x240 --no-simulator"), invalid);
+  EXPECT_EQ(Stderr().find("noise calibration"), std::string::npos) << Stderr();
+  EXPECT_EQ(Run("bench --size 320x240"), invalid);
   EXPECT_NE(Stderr().find("got '320x240'"), std::string::npos) << Stderr();
+  EXPECT_EQ(Stderr().find("noise calibration"), std::string::npos) << Stderr();
 }
 
 #endif  // TOFCAM_CLI_PATH
