@@ -23,6 +23,11 @@ std::string CameraSourceHelp() {
   return out.empty() ? "(no camera sources built)" : out;
 }
 
+bool CameraSourceEnds(const std::string& spec) {
+  const auto it = CameraSourceRegistry().find(spec.substr(0, spec.find(':')));
+  return it == CameraSourceRegistry().end() || it->second.ends;
+}
+
 std::unique_ptr<Camera> OpenCamera(const std::string& spec, const CameraSourceOptions& options) {
   const auto colon = spec.find(':');
   const std::string kind = colon == std::string::npos ? spec : spec.substr(0, colon);

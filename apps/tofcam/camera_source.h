@@ -29,6 +29,8 @@ using CameraFactory =
 struct CameraSourceKind {
   std::string help;  ///< One line for --help, e.g. "sim:<scene|file.yaml>  simulated camera".
   CameraFactory factory;
+  /// false: Grab() may never run out (a simulator, a live stream), so "all frames" is no count.
+  bool ends = true;
 };
 
 std::map<std::string, CameraSourceKind>& CameraSourceRegistry();
@@ -39,6 +41,10 @@ bool RegisterCameraSource(const std::string& kind, CameraSourceKind source);
 [[nodiscard]] std::unique_ptr<Camera> OpenCamera(const std::string& spec,
                                                  const CameraSourceOptions& options);
 
+/// Whether the source `spec` names ends by itself (CameraSourceKind::ends); true for an unknown
+/// kind (OpenCamera reports that one).
+[[nodiscard]] bool CameraSourceEnds(const std::string& spec);
+
 /// Help text listing every registered source, for option descriptions.
 [[nodiscard]] std::string CameraSourceHelp();
 
@@ -46,4 +52,8 @@ bool RegisterCameraSource(const std::string& kind, CameraSourceKind source);
 
 #define TOFCAM_REGISTER_CAMERA_SOURCE(kind, help, factory)       \
   [[maybe_unused]] static const bool tofcam_registered_source_ = \
-      ::tofcam::cli::RegisterCameraSource(kind, {help, factory})
+      ::tofcam::cli::RegisterCameraSource(kind, {help, factory, true})
+// A source that may never run out (CameraSourceKind::ends false).
+#define TOFCAM_REGISTER_ENDLESS_CAMERA_SOURCE(kind, help, factory) \
+  [[maybe_unused]] static const bool tofcam_registered_source_ =   \
+      ::tofcam::cli::RegisterCameraSource(kind, {help, factory, false})

@@ -65,6 +65,15 @@ void RunExport(const ExportOptions& o) {
     throw Error(ErrorCode::kInvalidArgument, "give exactly one of --in FILE or --camera SPEC");
   }
   if (o.first < 0) throw Error(ErrorCode::kInvalidArgument, "--first must be >= 0");
+  if (o.count < -1) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--count " + std::to_string(o.count) + ": expected -1 (all) or a count >= 0");
+  }
+  if (!o.camera.empty() && o.count == -1 && !CameraSourceEnds(o.camera)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "--camera '" + o.camera +
+                    "' does not end by itself: give the number of frames with --count N");
+  }
   std::unique_ptr<Camera> camera;
   if (!o.in.empty()) {
     auto playback = std::make_unique<PlaybackCamera>(o.in);
@@ -129,7 +138,9 @@ void SetupExportCommand(CLI::App& app) {
                   "csv (one row per pixel)")
       ->required();
   sub->add_option("--first", o->first, "First frame index")->capture_default_str();
-  sub->add_option("--count", o->count, "Number of frames (-1 = all)")->capture_default_str();
+  sub->add_option("--count", o->count,
+                  "Number of frames (-1 = all; a sim: or ros2: source needs a count)")
+      ->capture_default_str();
   sub->add_flag("--only-valid", o->only_valid, "PLY/PCD: write valid points only");
   sub->callback([o] { RunExport(*o); });
 }

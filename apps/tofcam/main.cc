@@ -1,4 +1,6 @@
 // tofcam: command-line entry point.
+#include <hdf5.h>
+
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <exception>
@@ -66,6 +68,14 @@ int Run(int argc, char** argv) {
 // no exception escapes main (clang-tidy bugprone-exception-escape) and the user always gets a
 // one-line reason and a non-zero status.
 int main(int argc, char** argv) {
+  // libhdf5 closes what is still open from an atexit handler. After a reader gave up on a
+  // damaged recording, a file libhdf5 itself cannot close makes that handler print "HDF5:
+  // infinite loop closing library" and a line of its interfaces after tofcam's one-line error.
+  // Every tofcam file is closed by its owner before main returns (a recording's frames are
+  // committed one by one), so the handler has nothing to do: it is not registered. Before any
+  // other HDF5 call, so here, in the program, never in the library (a host program's own HDF5
+  // files need it).
+  H5dont_atexit();
   try {
     return Run(argc, argv);
   } catch (const std::exception& e) {

@@ -68,7 +68,7 @@ struct RunOptions {
   std::string out;
   int png_every = 0;
   int ply_every = 0;
-  double fps = -1.0;  // < 0: the config's controller.frame_rate_hz
+  std::optional<double> fps;  // unset: the config's controller.frame_rate_hz
   bool print_config = false;
   CameraSourceOptions source;
   // --ros2: publish every frame as ROS 2 topics (docs/ros2.md).
@@ -115,8 +115,12 @@ PipelineOptions ResolveOptions(const RunOptions& o, std::set<std::string>* given
   if (!o.alternate_calibration.empty()) {
     options.alternate_calibration_file = o.alternate_calibration;
   }
-  if (o.fps >= 0.0) {
-    options.controller.frame_rate_hz = o.fps;
+  if (o.fps) {
+    if (!std::isfinite(*o.fps) || *o.fps < 0.0) {
+      throw Error(ErrorCode::kInvalidArgument,
+                  "--fps " + std::to_string(*o.fps) + ": expected a frame rate >= 0 Hz");
+    }
+    options.controller.frame_rate_hz = *o.fps;
     if (given_keys != nullptr) given_keys->insert("controller.frame_rate_hz");
   }
   if (!o.controller.empty()) {

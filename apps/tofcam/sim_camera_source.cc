@@ -19,7 +19,7 @@ std::unique_ptr<Camera> OpenSimCamera(const std::string& rest, const CameraSourc
                                                 sim_options);
 }
 
-TOFCAM_REGISTER_CAMERA_SOURCE(
+TOFCAM_REGISTER_ENDLESS_CAMERA_SOURCE(
     "sim",
     "sim:<scene|file.yaml>[?param=value&...]  simulated camera (scenes: wall, hand, pavilion, "
     "mirror, lamps, corridor, beyond-range, demo, approach)",

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "commands.h"
@@ -29,7 +30,7 @@ struct SimulateOptions {
   int supersampling = 2;
   int threads = 1;
   double power_on_time_s = 600;
-  double pan_deg = std::nan("");
+  std::optional<double> pan_deg;  // unset: the scene's own pan
   bool ideal = false;
   bool interreflection = false;
   int interreflection_samples = 4;
@@ -104,7 +105,7 @@ void RunSimulate(const SimulateOptions& o) {
     }
     camera.SetIntegrationTimeRegister(static_cast<int>(reg));
   }
-  if (!std::isnan(o.pan_deg)) camera.SetPanAngleRad(o.pan_deg * kPi / 180);
+  if (o.pan_deg) camera.SetPanAngleRad(*o.pan_deg * kPi / 180);
 
   const std::filesystem::path out(o.out);
   std::unique_ptr<RecordingWriter> writer;

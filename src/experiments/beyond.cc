@@ -10,7 +10,7 @@
 namespace tofcam::experiments::internal {
 namespace {
 
-constexpr double kAlternateHz = 17e6;  // with the SR-2's 20 MHz: L 8.82 and 7.49 m, pair 50 m
+constexpr double kAlternateHz = 17e6;  // with the SR-2's 20 MHz: L 8.82 and 7.49 m, pair 150 m
 constexpr double kHdrRatio = 4.0;      // the long exposure: two bits more of dynamic range
 
 ScatteringFit EstimatePsf(const Shared& s, const ExperimentOptions& o) {

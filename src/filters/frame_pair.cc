@@ -106,7 +106,9 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
   }
   const double f1 = previous.info.modulation_frequency_hz;
   const double f2 = current.info.modulation_frequency_hz;
-  if (!(f1 > 0.0) || !(f2 > 0.0)) Bad("frame pair: modulation frequencies must be > 0");
+  if (!(f1 > 0.0) || !(f2 > 0.0) || !std::isfinite(f1) || !std::isfinite(f2)) {
+    Bad("frame pair: modulation frequencies must be finite and > 0");
+  }
   const double l1 = UnambiguousRangeM(f1), l2 = UnambiguousRangeM(f2);
   const bool dual = f1 != f2;
   double range = options.max_range_m;
@@ -242,7 +244,8 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
   }
 }
 
-FramePairCombiner::FramePairCombiner(const FramePairOptions& options) : options_(options) {
+FramePairCombiner::FramePairCombiner(const FramePairOptions& options, bool pair_exposures)
+    : options_(options), pair_exposures_(pair_exposures) {
   options_.Validate();
 }
 
@@ -250,7 +253,8 @@ bool FramePairCombiner::Process(MetricFrame& frame) {
   const bool differs =
       previous_.has_value() &&
       (previous_->info.modulation_frequency_hz != frame.info.modulation_frequency_hz ||
-       previous_->info.integration_time_register != frame.info.integration_time_register) &&
+       (pair_exposures_ &&
+        previous_->info.integration_time_register != frame.info.integration_time_register)) &&
       previous_->width() == frame.width() && previous_->height() == frame.height();
   if (!differs) {
     previous_ = frame;

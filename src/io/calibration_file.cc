@@ -10,6 +10,7 @@
 #include <set>
 #include <string>
 
+#include "../core/yaml_checks.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 
@@ -240,6 +241,7 @@ OffsetCalibration LoadCalibration(const std::filesystem::path& path) {
     throw Error(ErrorCode::kFormat,
                 source + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
   }
+  internal::RejectDuplicateKeys(root, source);
   if (!root.IsMap()) in.Fail("not a tofcam calibration file (expected a YAML mapping)");
   const YAML::Node format = in.Required(root, "format");
   if (in.String(format, "format") != kFormatTag) {

@@ -740,8 +740,12 @@ std::optional<Frame> ImportedCamera::Grab() {
   if (next_ >= sequence_.frames.size()) {
     if (!loop_) return std::nullopt;
     next_ = 0;
+    continuation_.Wrap(sequence_.frames.front().info, sequence_.frames.back().info,
+                       sequence_.frames.size());
   }
-  return sequence_.frames[next_++];
+  Frame frame = sequence_.frames[next_++];
+  continuation_.Apply(frame.info);
+  return frame;
 }
 
 namespace {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "../core/yaml_checks.h"
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
 #include "tofcam/io/calibration_file.h"
@@ -380,7 +381,8 @@ class Reader {
     const YAML::Node node = Lookup(key);
     if (!node) return;
     bool parsed = false;
-    if (!node.IsScalar() || !YAML::convert<bool>::decode(node, parsed)) {
+    if (!node.IsScalar() || internal::IsQuoted(node) ||
+        !YAML::convert<bool>::decode(node, parsed)) {
       Fail(node, TypeMessage(key, "true or false", node));
     }
     value = parsed;
@@ -391,7 +393,7 @@ class Reader {
     const std::string text = node.IsScalar() ? node.Scalar() : std::string();
     long long parsed = 0;
     const auto result = std::from_chars(text.data(), text.data() + text.size(), parsed);
-    if (!node.IsScalar() || text.empty() || result.ec != std::errc() ||
+    if (!node.IsScalar() || internal::IsQuoted(node) || text.empty() || result.ec != std::errc() ||
         result.ptr != text.data() + text.size() || parsed < std::numeric_limits<int>::min() ||
         parsed > std::numeric_limits<int>::max()) {
       Fail(node, TypeMessage(key, "an integer", node));
@@ -402,7 +404,8 @@ class Reader {
     const YAML::Node node = Lookup(key);
     if (!node) return;
     double parsed = 0.0;
-    if (!node.IsScalar() || !YAML::convert<double>::decode(node, parsed)) {
+    if (!node.IsScalar() || internal::IsQuoted(node) ||
+        !YAML::convert<double>::decode(node, parsed)) {
       Fail(node, TypeMessage(key, "a number", node));
     }
     value = parsed;
@@ -527,6 +530,7 @@ PipelineOptions ParsePipelineConfig(std::string_view yaml_text, const std::strin
     throw Error(ErrorCode::kFormat,
                 source + ":" + std::to_string(e.mark.line + 1) + ": not YAML: " + e.msg);
   }
+  internal::RejectDuplicateKeys(root, source);
   if (root && !root.IsNull() && !root.IsMap()) {
     throw Error(ErrorCode::kFormat, source + ":" + std::to_string(root.Mark().line + 1) +
                                         ": a pipeline configuration must be a mapping");

@@ -115,6 +115,7 @@ struct RecordingWriter::Impl {
   bool has_confidence = false;
   std::string frame_model;
   std::size_t count = 0;
+  std::int64_t last_timestamp_ns = 0;  // frame count - 1's (when count > 0)
   bool closed = false;
 
   Handle CreateImageDataset(const std::string& name, hid_t file_type) {
@@ -292,6 +293,14 @@ void RecordingWriter::Append(const Frame& frame) {
     throw Error(ErrorCode::kInvalidArgument, m.path.string() + ": Append() after Close()");
   }
   ValidateFrame(frame, m.path.string() + " frame " + std::to_string(m.count));
+  // The reader refuses a recording whose timestamps decrease: refuse to write one.
+  if (m.count > 0 && frame.info.timestamp_ns < m.last_timestamp_ns) {
+    throw Error(ErrorCode::kInvalidArgument,
+                m.path.string() + ": frame " + std::to_string(m.count) + "'s timestamp " +
+                    std::to_string(frame.info.timestamp_ns) +
+                    " ns is before the previous frame's " + std::to_string(m.last_timestamp_ns) +
+                    " ns (timestamps may not decrease)");
+  }
   if (!frame.distance.SameSize(m.camera.width(), m.camera.height())) {
     throw Error(ErrorCode::kMismatch,
                 m.path.string() + ": frame is " + std::to_string(frame.width()) + "x" +
@@ -382,6 +391,7 @@ void RecordingWriter::Append(const Frame& frame) {
                                     &committed);
   flush();
   ++m.count;
+  m.last_timestamp_ns = frame.info.timestamp_ns;
 }
 
 void RecordingWriter::Close() {
@@ -741,6 +751,7 @@ std::optional<Frame> PlaybackCamera::Grab() {
     if (!options_.loop) return std::nullopt;
     next_ = 0;
     start_wall_.reset();
+    loop_.Wrap(reader_.Info(0), reader_.Info(reader_.frame_count() - 1), reader_.frame_count());
   }
   Frame frame = reader_.Read(next_);
   if (options_.real_time) {
@@ -758,6 +769,7 @@ std::optional<Frame> PlaybackCamera::Grab() {
   }
   ++next_;
   RefreshInfo();
+  loop_.Apply(frame.info);
   return frame;
 }
 

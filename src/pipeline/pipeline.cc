@@ -51,6 +51,7 @@ void PipelineOptions::Validate() const {
   ValidateSection("filters.flying_pixel", [&] { filters.flying_pixel.Validate(); });
   ValidateSection("filters.jump_edge", [&] { filters.jump_edge.Validate(); });
   ValidateSection("filters.weingarten", [&] { filters.weingarten.Validate(); });
+  ValidateSection("filters.confidence", [&] { filters.confidence.Validate(); });
   if (filters.accuracy_enabled && !accuracy_enabled) {
     throw Error(ErrorCode::kInvalidArgument,
                 "filters.accuracy.enabled needs accuracy.enabled (the filter reads ΔL)");
@@ -175,7 +176,11 @@ Pipeline::Pipeline(PipelineOptions options, const CameraInfo& camera)
   if (options_.controller_enabled) controller_ = MakeController(c);
   hdr_base_register_ = c.bias_register;
   if (options_.temporal_enabled) temporal_.emplace(options_.temporal);
-  if (options_.frame_pair_enabled) pair_.emplace(options_.frame_pair);
+  // Frames that differ only in integration time are an HDR pair only when the pipeline alternates
+  // exposures; otherwise the controller's next step is not a second exposure of the same scene.
+  if (options_.frame_pair_enabled) {
+    pair_.emplace(options_.frame_pair, /*pair_exposures=*/options_.hdr_exposure_ratio > 0.0);
+  }
 
   options_.stats.intensity_roi = c.roi;
   options_.stats.intensity_exclude_flags = c.exclude_flags;
@@ -217,8 +222,12 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   s.calibration = options_.calibration ? &*options_.calibration : nullptr;
   s.table = table_ ? &*table_ : nullptr;
   s.table_range_m = UnambiguousRangeM(camera_.modulation_frequency_hz);
-  if (options_.alternate_modulation_frequency_hz > 0.0 &&
-      frame.info.modulation_frequency_hz != camera_.modulation_frequency_hz) {
+  // A frame at another frequency than the camera's is taken for one at the alternate frequency
+  // when there is one (its own calibration, or none); a calibration's own check (eq. 1) refuses
+  // a frame at a frequency it was not made for.
+  const bool at_alternate = options_.alternate_modulation_frequency_hz > 0.0 &&
+                            frame.info.modulation_frequency_hz != camera_.modulation_frequency_hz;
+  if (at_alternate) {
     // A frame at the alternate frequency: its own calibration, or none.
     const std::optional<OffsetCalibration>& alt = options_.alternate_calibration;
     s.calibration = alt ? &*alt : nullptr;
@@ -302,9 +311,7 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   result.next_modulation_frequency_hz = m.info.modulation_frequency_hz;
   if (options_.alternate_modulation_frequency_hz > 0.0) {
     result.next_modulation_frequency_hz =
-        m.info.modulation_frequency_hz == camera_.modulation_frequency_hz
-            ? options_.alternate_modulation_frequency_hz
-            : camera_.modulation_frequency_hz;
+        at_alternate ? camera_.modulation_frequency_hz : options_.alternate_modulation_frequency_hz;
   }
   result.stats = ComputeFrameStats(m, options_.stats);
   result.stats.next_integration_register = result.next_integration_register;

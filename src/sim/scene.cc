@@ -3,10 +3,14 @@
 #include <tiny_obj_loader.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
+#include <vector>
 
 #include "tofcam/core/atomic_file.h"
 #include "tofcam/core/error.h"
@@ -261,8 +265,13 @@ void LoadPly(const std::filesystem::path& path, Verts& verts, Tris& tris) {
         }
       }
       if (is_vertex) {
-        if (!std::isfinite(vals[ix]) || !std::isfinite(vals[iy]) || !std::isfinite(vals[iz])) {
-          PlyFail(path, "vertex " + std::to_string(n) + " is not finite");
+        // Checked as floats: a double beyond the float range (1e39) is finite but no vertex
+        // (and converting it is undefined behaviour).
+        const auto in_float = [](double x) {
+          return std::isfinite(x) && std::abs(x) <= std::numeric_limits<float>::max();
+        };
+        if (!in_float(vals[ix]) || !in_float(vals[iy]) || !in_float(vals[iz])) {
+          PlyFail(path, "vertex " + std::to_string(n) + " is not a finite float");
         }
         verts.emplace_back(static_cast<float>(vals[ix]), static_cast<float>(vals[iy]),
                            static_cast<float>(vals[iz]));
@@ -276,10 +285,65 @@ void LoadPly(const std::filesystem::path& path, Verts& verts, Tris& tris) {
   if (!have_vertices) PlyFail(path, "no vertex element");
 }
 
+// tinyobjloader reads what it cannot parse as 0 ("v abc 1 2", "v nan 1 2"), accepts a vertex with
+// two coordinates and wraps a face index beyond int ("f 1 2 99999999999999999999") into range, so
+// a malformed mesh would render as a different one. The vertex and face lines are checked here
+// first: a vertex is 3 (or 4 with w, or 6 with a colour) finite float numbers, a face at least 3
+// vertex references whose index (before any '/') is a whole number within the vertices so far,
+// counted from the end when negative (OBJ's relative indices).
+void CheckObjText(const std::filesystem::path& path, const std::string& text) {
+  const auto fail = [&](std::size_t line, const std::string& problem) {
+    throw Error(ErrorCode::kFormat,
+                path.string() + ":" + std::to_string(line) + ": OBJ: " + problem);
+  };
+  long long vertices = 0;
+  std::istringstream lines(text);
+  std::string line;
+  for (std::size_t number = 1; std::getline(lines, line); ++number) {
+    line = line.substr(0, line.find('#'));  // the rest is a comment
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream in(line);
+    std::string kind;
+    if (!(in >> kind) || (kind != "v" && kind != "f")) continue;
+    std::vector<std::string> tokens;
+    for (std::string t; in >> t;) tokens.push_back(t);
+    if (kind == "v") {
+      if (tokens.size() != 3 && tokens.size() != 4 && tokens.size() != 6) {
+        fail(number,
+             "a vertex needs 3 coordinates, got " + std::to_string(tokens.size()) + " numbers");
+      }
+      for (const std::string& t : tokens) {
+        char* end = nullptr;
+        errno = 0;
+        const double x = std::strtod(t.c_str(), &end);
+        if (end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(x) ||
+            std::abs(x) > std::numeric_limits<float>::max()) {
+          fail(number, "vertex coordinate '" + t + "' is not a finite number");
+        }
+      }
+      ++vertices;
+      continue;
+    }
+    if (tokens.size() < 3) fail(number, "a face needs at least 3 vertices");
+    for (const std::string& t : tokens) {
+      const std::string index = t.substr(0, t.find('/'));
+      char* end = nullptr;
+      errno = 0;
+      const long long k = std::strtoll(index.c_str(), &end, 10);
+      if (index.empty() || end != index.c_str() + index.size() || errno == ERANGE || k == 0 ||
+          k > vertices || k < -vertices) {
+        fail(number, "face vertex '" + t + "' is not one of the " + std::to_string(vertices) +
+                         " vertices so far");
+      }
+    }
+  }
+}
+
 void LoadObj(const std::filesystem::path& path, Verts& verts, Tris& tris) {
   if (!std::filesystem::exists(path)) {
     throw Error(ErrorCode::kNotFound, path.string() + ": mesh file not found");
   }
+  CheckObjText(path, ReadFile(path, std::size_t{1} << 30));
   tinyobj::ObjReaderConfig config;
   config.triangulate = true;
   config.vertex_color = false;

@@ -9,6 +9,7 @@
 #include <set>
 #include <string>
 
+#include "../core/yaml_checks.h"
 #include "tofcam/core/error.h"
 
 namespace tofcam::sim::internal {
@@ -114,13 +115,17 @@ class YamlReader {
 };
 
 /// Parses YAML text, turning yaml-cpp syntax errors into Error(kFormat) with source and line.
+/// A key repeated within one mapping is Error(kFormat) too (tofcam::internal::RejectDuplicateKeys).
 inline YAML::Node ParseYaml(const std::string& text, const std::string& source) {
+  YAML::Node root;
   try {
-    return YAML::Load(text);
+    root = YAML::Load(text);
   } catch (const YAML::Exception& e) {
     throw Error(ErrorCode::kFormat,
                 source + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg);
   }
+  tofcam::internal::RejectDuplicateKeys(root, source);
+  return root;
 }
 
 /// The built-in embedded files: (relative path under scenes/, content).

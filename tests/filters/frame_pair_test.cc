@@ -277,6 +277,36 @@ TEST(FramePairCombiner, CombinesOnlyWhenSettingsAlternate) {
   EXPECT_FALSE(combiner.Process(c2));  // same settings as the frame before: passed through
 }
 
+TEST(FramePairCombiner, PairsExposuresOnlyWhenAskedTo) {
+  // A controller's step (register 10 -> 40) at one frequency. Pixel 1 is clipped in the second
+  // frame: as HDR it takes the first frame's 5 m and loses the reject bit; without exposure
+  // pairing the frame passes through as it came, clipped pixel and all.
+  MetricFrame first = Pixels(20e6, 3.0, 5.0, 0.03f, 10);
+  MetricFrame second = Pixels(20e6, 3.02, 5.0, 0.01f, 40);
+  second.flags[1] = PixelFlags(Flag::kSaturated);
+  second.radial_distance_m[1] = 0.0f;
+  MetricFrame first_copy = first, second_copy = second;
+
+  FramePairCombiner hdr;  // pair_exposures: the default
+  EXPECT_FALSE(hdr.Process(first));
+  EXPECT_TRUE(hdr.Process(second));
+  EXPECT_NEAR(second.radial_distance_m[1], 5.0, 1e-6);
+  EXPECT_FALSE(second.flags[1].Any(kRejectMask));
+
+  FramePairCombiner frequencies_only({}, /*pair_exposures=*/false);
+  EXPECT_FALSE(frequencies_only.Process(first_copy));
+  EXPECT_FALSE(frequencies_only.Process(second_copy));
+  EXPECT_EQ(second_copy.radial_distance_m[0], 3.02f);
+  EXPECT_EQ(second_copy.radial_distance_m[1], 0.0f);
+  EXPECT_TRUE(second_copy.flags[1].Has(Flag::kSaturated));
+  // A change of frequency is still a pair: a surface at 9 m, unwrapped from 20 and 17 MHz.
+  MetricFrame third = Pixels(20e6, 9.0, 9.0, 0.01f, 40);
+  MetricFrame fourth = Pixels(17e6, 9.0, 9.0, 0.01f, 40);
+  EXPECT_FALSE(frequencies_only.Process(third));  // same settings as the frame before
+  EXPECT_TRUE(frequencies_only.Process(fourth));
+  EXPECT_NEAR(fourth.radial_distance_m[0], 9.0, 1e-5);
+}
+
 TEST(WrapCheck, FlagsSurfacesTooDarkForTheirDistance) {
   // Pixel 0: a white wall at 2 m. Pixel 1: the same wall at 9.5 m, read as 2.005 m at 20 MHz,
   // amplitude (2/9.5)² of pixel 0's: exactly on the line for margin 1, below it for the
@@ -308,6 +338,12 @@ TEST(FramePair, BadInputIsAClearError) {
   MetricFrame b = Pixels(17e6, 1, 1, 0.01f);
   b.delta_l_m = Image<float>();
   EXPECT_THROW(CombineFramePair(a, b), Error);
+  for (double bad : {0.0, -17e6, std::numeric_limits<double>::infinity(), std::nan("")}) {
+    MetricFrame c = Pixels(17e6, 1, 1, 0.01f);
+    c.info.modulation_frequency_hz = bad;
+    EXPECT_THROW(CombineFramePair(a, c), Error) << bad;
+    EXPECT_THROW(CombineFramePair(c, a), Error) << bad;
+  }
   FramePairOptions o;
   o.max_disagreement_sigma = 0;
   EXPECT_THROW(FramePairCombiner{o}, Error);

@@ -267,6 +267,10 @@ TEST(CalibrationFileTest, RejectsEveryMalformedField) {
   ExpectRejected("delta_l_scale: 0.1875", "delta_l_scale: -1", "must be in (0, 1e6]");
   ExpectRejected("  delta_l_scale: 0.1875\n", "", "missing key 'delta_l_scale'");
   ExpectRejected("pixels_used: 19000", "pixels_used: 19000\n  sigma: 1", "unknown key 'sigma'");
+  // A repeated key would otherwise leave the first value in place without a word.
+  ExpectRejected("width: 5", "width: 5\nwidth: 999", "key 'width' appears twice");
+  ExpectRejected("delta_l_scale: 0.1875", "delta_l_scale: 0.1875\n  delta_l_scale: 7",
+                 "key 'delta_l_scale' appears twice");
   ExpectRejected("log_amplitude: -0.8125", "log_amplitude: 5000", "within +-1e3");
   ExpectRejected("log_amplitude: -0.8125", "log_amplitude: .nan", "log_amplitude");
   ExpectRejected("amplitude_ref: 24381.5", "amplitude_ref: 0", "amplitude_ref");

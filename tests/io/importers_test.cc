@@ -609,8 +609,17 @@ TEST(ImportedCamera, ServesFramesInOrderAndLoops) {
   EXPECT_EQ(once.Grab()->info.sequence, 0u);
   EXPECT_EQ(once.Grab()->info.sequence, 1u);
   EXPECT_FALSE(once.Grab().has_value());
+  // Looping continues the sequence numbers and timestamps: each pass starts one frame interval
+  // after the last frame of the pass before (a recording of it stays readable).
+  seq.frames[0].info.timestamp_ns = 1000;
+  seq.frames[1].info.timestamp_ns = 1400;
   ImportedCamera looping(seq, true);
-  for (int i = 0; i < 5; ++i) EXPECT_EQ(looping.Grab()->info.sequence, i % 2);
+  for (int i = 0; i < 5; ++i) {
+    const Frame f = *looping.Grab();
+    EXPECT_EQ(f.info.sequence, static_cast<std::uint64_t>(i));
+    EXPECT_EQ(f.info.timestamp_ns, 1000 + 400 * i);
+    EXPECT_EQ(f.distance, seq.frames[static_cast<std::size_t>(i % 2)].distance);
+  }
   EXPECT_NO_THROW(looping.SetIntegrationTimeRegister(0));
   EXPECT_EQ(CodeOf([&] { looping.SetIntegrationTimeRegister(5); }), ErrorCode::kUnsupported);
   EXPECT_EQ(CodeOf([&] { looping.SetModulationFrequencyHz(20e6); }), ErrorCode::kUnsupported);

@@ -268,6 +268,30 @@ TEST(PipelineConfigTest, WrongTypesNameFileLineAndKey) {
   ExpectError("filters: 3\n", ErrorCode::kFormat, {"conf.yaml:1:", "'filters' must be a mapping"});
   ExpectError("- 1\n- 2\n", ErrorCode::kFormat, {"conf.yaml:1:", "must be a mapping"});
   ExpectError("filters: {accuracy: [\n", ErrorCode::kFormat, {"conf.yaml", "not YAML"});
+  // Quoted scalars are strings, not numbers or booleans.
+  ExpectError("filters:\n  range:\n    max_distance_m: \"5\"\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "filters.range.max_distance_m", "a number"});
+  ExpectError("filters:\n  weingarten:\n    min_points: '7'\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "filters.weingarten.min_points", "an integer"});
+  ExpectError("accuracy:\n  enabled: \"true\"\n", ErrorCode::kFormat,
+              {"conf.yaml:2:", "accuracy.enabled", "true or false"});
+}
+
+TEST(PipelineConfigTest, ARepeatedKeyIsAnErrorNotASilentlyDroppedValue) {
+  // yaml-cpp keeps both pairs and returns the first: the second value would be lost.
+  ExpectError("denoise:\n  radius_px: 1\n  radius_px: 9\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "'radius_px'", "twice"});
+  ExpectError("controller:\n  kind: fixed\n  kind: bogus\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "'kind'", "twice"});
+  ExpectError("filters: {}\naccuracy: {}\nfilters: {}\n", ErrorCode::kFormat,
+              {"conf.yaml:3:", "'filters'", "twice"});
+  // The same key in two different mappings is fine, and so is an alias used twice.
+  const PipelineOptions o = ParsePipelineConfig(
+      "filters:\n  accuracy:\n    enabled: true\n  amplitude: &on\n    enabled: true\n"
+      "  range: *on\naccuracy:\n  enabled: true\n",
+      "conf.yaml");
+  EXPECT_TRUE(o.filters.amplitude_enabled);
+  EXPECT_TRUE(o.filters.range_enabled);
 }
 
 TEST(PipelineConfigTest, OutOfRangeValuesNameTheField) {

@@ -113,6 +113,15 @@ Frame MakeFrame(const CameraInfo& cam, int index, bool flags, bool truth, std::m
   return f;
 }
 
+// Writes frames 0..n-1 of MakeFrame (no flags, no truth) to `file`, closed on return; returns
+// `file`.
+fs::path WriteFrames(const fs::path& file, const CameraInfo& cam, int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  RecordingWriter writer(file, cam);
+  for (int i = 0; i < n; ++i) writer.Append(MakeFrame(cam, i, false, false, rng));
+  return file;
+}
+
 void ExpectSameFrame(const Frame& a, const Frame& b) {
   EXPECT_EQ(a.distance, b.distance);
   EXPECT_EQ(a.amplitude, b.amplitude);
@@ -215,7 +224,13 @@ TEST_F(RecordingTest, PlaybackSeeksLoopsAndRefusesChanges) {
   EXPECT_EQ(camera.IntegrationTimeRegister(), 12);
   EXPECT_EQ(camera.Grab()->info.sequence, 2u);
   EXPECT_EQ(camera.Grab()->info.sequence, 3u);
-  EXPECT_EQ(camera.Grab()->info.sequence, 0u);  // looped
+  // Looped: frame 0 again, its sequence number and timestamp continued one frame interval
+  // after frame 3 (frames are 33333333 ns apart), its data unchanged.
+  const Frame again = *camera.Grab();
+  EXPECT_EQ(again.info.sequence, 4u);
+  EXPECT_EQ(again.info.timestamp_ns, 1'000'000'000LL + 4 * 33'333'333LL);
+  EXPECT_EQ(again.distance, frames[0].distance);
+  EXPECT_EQ(camera.Grab()->info.timestamp_ns, 1'000'000'000LL + 5 * 33'333'333LL);
   // Frame 2 has timestamp 1e9 + 2 * 33333333 ns; one ns later selects frame 3.
   camera.SeekToTimeNs(1'000'000'000LL + 2 * 33'333'333LL);
   EXPECT_EQ(camera.position(), 2u);
@@ -242,20 +257,33 @@ TEST_F(RecordingTest, PlaybackSeeksLoopsAndRefusesChanges) {
   EXPECT_NO_THROW(camera.SetPanAngleRad(-0.5));
 }
 
+TEST_F(RecordingTest, ALoopedPlaybackRecordsAgainAndReadsBack) {
+  // Recording a looped playback used to write timestamps that start again at each pass, which
+  // the reader then refused ("timestamps decrease").
+  const CameraInfo cam = SmallCamera();
+  PlaybackOptions opts;
+  opts.loop = true;
+  PlaybackCamera camera(WriteFrames(dir_ / "rec.h5", cam, 3, 5), opts);
+  {
+    RecordingWriter again(dir_ / "looped.h5", cam);
+    for (int i = 0; i < 7; ++i) again.Append(*camera.Grab());
+  }
+  const RecordingReader reader(dir_ / "looped.h5");
+  ASSERT_EQ(reader.frame_count(), 7u);
+  for (std::size_t i = 0; i < 7; ++i) {
+    EXPECT_EQ(reader.Info(i).timestamp_ns,
+              1'000'000'000LL + static_cast<long long>(i) * 33'333'333LL);
+    EXPECT_EQ(reader.Info(i).sequence, i);
+  }
+}
+
 TEST_F(RecordingTest, RealTimePlaybackFollowsTimestamps) {
   // Pacing is checked as a lower bound only (sleeping can overshoot, never undershoot): five
   // frames 33.3 ms apart at speed 2 cannot be served in less than 4 * 16.67 ms.
-  const CameraInfo cam = SmallCamera();
-  std::mt19937 rng(3);
-  const fs::path file = dir_ / "rec.h5";
-  {
-    RecordingWriter writer(file, cam);
-    for (int i = 0; i < 5; ++i) writer.Append(MakeFrame(cam, i, false, false, rng));
-  }
   PlaybackOptions opts;
   opts.real_time = true;
   opts.speed = 2.0;
-  PlaybackCamera camera(file, opts);
+  PlaybackCamera camera(WriteFrames(dir_ / "rec.h5", SmallCamera(), 5, 3), opts);
   const auto start = std::chrono::steady_clock::now();
   int n = 0;
   while (camera.Grab()) ++n;
@@ -284,6 +312,20 @@ TEST_F(RecordingTest, WriterRejectsInconsistentFrames) {
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::kMismatch);
   }
+  // A timestamp before the previous frame's: the reader would refuse the whole file.
+  Frame earlier = MakeFrame(cam, 1, true, false, rng);
+  earlier.info.timestamp_ns -= 2 * 33'333'333LL;
+  try {
+    writer.Append(earlier);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("timestamps may not decrease"), std::string::npos)
+        << e.what();
+  }
+  Frame same_time = MakeFrame(cam, 1, true, false, rng);  // equal timestamps are allowed
+  same_time.info.timestamp_ns = MakeFrame(cam, 0, true, false, rng).info.timestamp_ns;
+  writer.Append(same_time);
   writer.Close();
   EXPECT_THROW(writer.Append(MakeFrame(cam, 2, true, false, rng)), Error);
 
@@ -308,7 +350,7 @@ TEST_F(RecordingTest, WriterRejectsInconsistentFrames) {
   }
   truth_writer.Close();
   EXPECT_EQ(RecordingReader(dir_ / "truth.h5").frame_count(), 1u);
-  EXPECT_EQ(RecordingReader(dir_ / "rec.h5").frame_count(), 1u);
+  EXPECT_EQ(RecordingReader(dir_ / "rec.h5").frame_count(), 2u);
   RecordingOptions bad;
   bad.compression_level = 10;
   EXPECT_THROW(RecordingWriter(dir_ / "bad.h5", cam, bad), Error);

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -301,6 +302,19 @@ TEST(PipelineTest, RejectsMismatchesAndBadOptions) {
     EXPECT_NE(std::string(e.what()).find("filters.accuracy"), std::string::npos) << e.what();
   }
 
+  // Every section is checked, enabled or not: the vendor-confidence threshold too.
+  for (double bad_confidence : {-5.0, 2e9, std::nan("")}) {
+    PipelineOptions hidden;
+    hidden.filters.confidence.min_confidence = bad_confidence;
+    try {
+      Pipeline p(hidden, TinyCamera());
+      FAIL() << bad_confidence;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+      EXPECT_NE(std::string(e.what()).find("filters.confidence"), std::string::npos) << e.what();
+    }
+  }
+
   PipelineOptions disjoint;
   disjoint.controller.min_register = 300;
   disjoint.controller.max_register = 400;
@@ -317,6 +331,25 @@ TEST(PipelineTest, RejectsMismatchesAndBadOptions) {
     FAIL();
   } catch (const Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+  // A calibrated pipeline refuses a frame at a frequency its calibration was not made for; an
+  // uncalibrated one converts it with the frame's own L.
+  PipelineOptions calibrated;
+  calibrated.calibration = TinyCalibration(0, 0);
+  Pipeline with_calibration(calibrated, TinyCamera());
+  Frame other = TinyFrame(1000, 2000);
+  other.info.modulation_frequency_hz = 17e6;
+  try {
+    (void)with_calibration.Process(other);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+  const PipelineResult raw = pipeline.Process(other);
+  EXPECT_NEAR(raw.frame.radial_distance_m[0], 1000 * UnambiguousRangeM(17e6) / 65536.0, 1e-6);
+  for (double hz : {std::nan(""), std::numeric_limits<double>::infinity(), -17e6}) {
+    other.info.modulation_frequency_hz = hz;
+    EXPECT_THROW((void)pipeline.Process(other), Error) << hz;
   }
 }
 
@@ -873,6 +906,56 @@ TEST_F(RunCommandTest, BadOptionsFailWithClearErrors) {
   EXPECT_EQ(Run("run --camera sim:hand --frames 1 --calibration " + (dir_ / "none.yaml").string() +
                 " --out " + (dir_ / "d").string()),
             ExitStatus(ErrorCode::kNotFound));
+  // Values a sentinel used to swallow: refused, not silently replaced by the default.
+  for (const char* fps : {"-5", "nan"}) {
+    EXPECT_EQ(Run(std::string("run --camera sim:hand --frames 1 --fps ") + fps + " --out " +
+                  (dir_ / "e").string()),
+              invalid)
+        << fps;
+    EXPECT_NE(Stderr().find("--fps"), std::string::npos) << Stderr();
+  }
+  EXPECT_EQ(Run("simulate --scene wall --frames 1 --pan-deg nan --out " + (dir_ / "f.h5").string()),
+            invalid);
+  EXPECT_NE(Stderr().find("pan angle"), std::string::npos) << Stderr();
+  // Export: a count below -1, and "all frames" of a source that never ends (it used to write
+  // files until the disk was full).
+  EXPECT_EQ(Run("export --camera sim:wall --count -5 --format csv --out " + (dir_ / "g").string()),
+            invalid);
+  EXPECT_NE(Stderr().find("--count -5"), std::string::npos) << Stderr();
+  EXPECT_EQ(Run("export --camera sim:wall --format csv --out " + (dir_ / "h").string()), invalid);
+  EXPECT_NE(Stderr().find("does not end"), std::string::npos) << Stderr();
+  EXPECT_FALSE(fs::exists(dir_ / "h"));
+  EXPECT_EQ(Run("export --camera sim:wall --count 2 --format csv --out " + (dir_ / "i").string()),
+            0)
+      << Stderr();
+  EXPECT_TRUE(fs::exists(dir_ / "i" / "frame_000001.csv"));
+}
+
+// A damaged recording gets exactly one line: libhdf5, unable to close the damaged file, used to
+// add "HDF5: infinite loop closing library" and a line of its interfaces at exit (bytes 56-70
+// of a one-frame recording made by this build's simulator: the root group's object header).
+TEST_F(RunCommandTest, ADamagedRecordingIsOneLineOfError) {
+  const fs::path good = dir_ / "one.h5";
+  ASSERT_EQ(Run("simulate --scene wall --frames 1 --supersampling 1 --out " + good.string()), 0)
+      << Stderr();
+  std::string bytes;
+  {
+    std::ifstream in(good, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_GT(bytes.size(), 100u);
+  for (const std::size_t at : {56u, 63u, 70u}) {
+    std::string damaged = bytes;
+    damaged[at] = static_cast<char>(0xBD);
+    const fs::path bad = dir_ / "bad.h5";
+    std::ofstream(bad, std::ios::binary) << damaged;
+    EXPECT_EQ(Run("export --in " + bad.string() + " --format csv --out " + (dir_ / "o").string()),
+              ExitStatus(ErrorCode::kFormat))
+        << at;
+    const std::string err = Stderr();
+    EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 1) << at << ":\n" << err;
+    EXPECT_NE(err.find("bad.h5"), std::string::npos) << err;
+  }
 }
 
 // `tofcam bench --stage TEXT --size WxH` times only the stage rows asked for (the text in any

@@ -8,6 +8,8 @@
 #include <fstream>
 #include <functional>
 #include <string>
+#include <tuple>
+#include <vector>
 
 #include "../scratch_dir.h"
 #include "tofcam/core/error.h"
@@ -112,6 +114,8 @@ TEST(SceneTest, ErrorsNameFileLineAndProblem) {
       {"  - {type: plane, material: white, size_m: [1, 1], position_m: [0, 0, $far]}\n",
        ":5:", "far"},
       {"  - {type: mesh, material: white, file: missing.ply}\n", ":5:", "missing.ply"},
+      {"  - {type: plane, material: white, size_m: [1, 1], size_m: [2, 2]}\n",
+       ":5:", "'size_m' appears twice"},
   };
   for (const auto& c : cases) {
     const auto path = TempFile("bad.yaml", base + c.body);
@@ -180,6 +184,44 @@ TEST(SceneTest, LoadsPlyAndObjMeshes) {
   const auto magic = TempFile("magic.ply", "plx\n");
   EXPECT_NE(ErrorOf([&] { LoadMesh(magic, v, t); }).find("magic"), std::string::npos);
   EXPECT_THROW(LoadMesh(TempFile("x.stl", "solid"), v, t), Error);
+  // A coordinate beyond the float range is no finite vertex (PLY reads doubles).
+  const auto huge = TempFile("huge.ply",
+                             "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty "
+                             "float y\nproperty float z\nend_header\n1e39 0 0\n");
+  EXPECT_NE(ErrorOf([&] { LoadMesh(huge, v, t); }).find("not a finite float"), std::string::npos);
+  // OBJ text tinyobjloader would read as another mesh: numbers it cannot parse become 0, a
+  // two-coordinate vertex passes, an index beyond int wraps into range.
+  const std::string tri = "v 0 0 2\nv 1 0 2\nv 0 1 2\n";
+  for (const auto& [text, line, words] :
+       std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"v 0 0 2\nv abc 0 2\nv 0 1 2\nf 1 2 3\n", ":2:", "'abc'"},
+           {"v 0 0 2\nv nan 0 2\nv 0 1 2\nf 1 2 3\n", ":2:", "'nan'"},
+           {"v 0 0 2\nv 1e39 0 2\nv 0 1 2\nf 1 2 3\n", ":2:", "'1e39'"},
+           {"v 0 0 2\nv 1 0\nv 0 1 2\nf 1 2 3\n", ":2:", "3 coordinates"},
+           {tri + "f 1 2 99999999999999999999\n", ":4:", "99999999999999999999"},
+           {tri + "f 1 2 4\n", ":4:", "'4'"},
+           {tri + "f 1 2 0\n", ":4:", "'0'"},
+           {tri + "f 1 2\n", ":4:", "at least 3"},
+           {tri + "f 1 2 x\n", ":4:", "'x'"},
+       }) {
+    const auto bad = TempFile("bad.obj", text);
+    const std::string msg = ErrorOf([&] { LoadMesh(bad, v, t); });
+    EXPECT_NE(msg.find(bad.string() + line), std::string::npos) << msg;
+    EXPECT_NE(msg.find(words), std::string::npos) << msg;
+    std::filesystem::remove(bad);
+  }
+  // What OBJ allows: relative (negative) indices, texture/normal references, comments, CRLF.
+  const auto fine =
+      TempFile("fine.obj",
+               "# a triangle\r\nv 0 0 2\r\nv 1 0 2 1\r\nv 0 1 2 # third\r\nf -3/1 2//1 3/1/1\r\n");
+  v.clear();
+  t.clear();
+  LoadMesh(fine, v, t);
+  EXPECT_EQ(v.size(), 3u);
+  ASSERT_EQ(t.size(), 1u);
+  EXPECT_EQ(t[0], Eigen::Vector3i(0, 1, 2));
+  std::filesystem::remove(fine);
+  std::filesystem::remove(huge);
 
   // A scene referencing a mesh relative to its own folder.
   const auto scene =

@@ -5,6 +5,8 @@
 /// Error(kUnsupported); out-of-range settings throw Error(kInvalidArgument) and leave the camera
 /// unchanged.
 
+#include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -39,6 +41,29 @@ struct CameraInfo {
   /// Integration time in µs of a register value.
   [[nodiscard]] double IntegrationTimeUs(int reg) const noexcept {
     return integration_time_base_us + reg * integration_time_step_us;
+  }
+};
+
+/// What a looping source (playback, imports) adds to the frames it serves again: each pass
+/// continues the timestamps and sequence numbers of the pass before, one mean frame interval
+/// after its last frame, so that a looped stream stays ordered in time (and a recording of it
+/// can be read back: RecordingReader refuses decreasing timestamps).
+struct LoopContinuation {
+  std::int64_t timestamp_ns = 0;  ///< Added to every served frame's timestamp, ns.
+  std::uint64_t sequence = 0;     ///< Added to every served frame's sequence number.
+
+  /// A pass over `count` (>= 1) frames from `first` to `last` ended; the next one follows it.
+  void Wrap(const FrameInfo& first, const FrameInfo& last, std::size_t count) noexcept {
+    const std::int64_t span = last.timestamp_ns - first.timestamp_ns;
+    const std::int64_t interval =
+        count >= 2 && span > 0 ? span / static_cast<std::int64_t>(count - 1) : 0;
+    timestamp_ns += (span > 0 ? span : 0) + interval;
+    sequence += last.sequence >= first.sequence ? last.sequence - first.sequence + 1 : count;
+  }
+  /// Shifts a served frame's info into the current pass.
+  void Apply(FrameInfo& info) const noexcept {
+    info.timestamp_ns += timestamp_ns;
+    info.sequence += sequence;
   }
 };
 

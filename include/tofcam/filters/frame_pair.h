@@ -5,7 +5,7 @@
 ///  - at two modulation frequencies (e.g. 20 and 17 MHz): **dual-frequency unwrapping**. Each
 ///    frame knows its distance only modulo its L; the pair of wrap counts (n1, n2) that makes
 ///    d1 + n1 L1 and d2 + n2 L2 agree best gives the distance up to the pair's much longer
-///    unambiguous range (c / (2 gcd(f1, f2)): 50 m for 20/17 MHz);
+///    unambiguous range (c / (2 gcd(f1, f2)): 150 m for 20/17 MHz, capped at `max_range_m`);
 ///  - at one frequency and two integration times: **HDR**. Where one exposure clipped the other
 ///    is used; where both are good they are averaged with weights 1/σ² (σ = each frame's ΔL).
 /// Either way, a pixel whose two distances disagree by more than `max_disagreement_sigma`
@@ -85,18 +85,22 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
                       const FramePairOptions& options = {});
 
 /// A stateful wrapper for a stream that alternates frequencies or exposures: Process(frame)
-/// combines each frame with the one before when the two differ in modulation frequency or
-/// integration time and returns true; the first frame of a stream and frames whose settings
-/// repeat the previous are passed through (false).
+/// combines each frame with the one before when the two differ in modulation frequency or (with
+/// `pair_exposures`) in integration time and returns true; the first frame of a stream, frames
+/// of another size than the one before and frames whose settings repeat the previous are passed
+/// through (false).
 class FramePairCombiner {
  public:
+  /// `pair_exposures` false: only frames at different modulation frequencies are combined (a
+  /// stream whose exposure changes for other reasons, e.g. a controller's step, is not HDR).
   /// Throws Error(kInvalidArgument) for bad options.
-  explicit FramePairCombiner(const FramePairOptions& options = {});
+  explicit FramePairCombiner(const FramePairOptions& options = {}, bool pair_exposures = true);
   bool Process(MetricFrame& frame);
   void Reset() { previous_.reset(); }
 
  private:
   FramePairOptions options_;
+  bool pair_exposures_ = true;
   std::optional<MetricFrame> previous_;  // the last frame as it came in (before combining)
   MetricFrame spare_;  // the incoming frame's copy; swapped with previous_, so no allocation
 };

@@ -18,7 +18,8 @@ void SaveCalibration(const std::filesystem::path& path, const OffsetCalibration&
 
 /// Reads and validates a calibration file. Throws Error(kNotFound) for a missing file and
 /// Error(kFormat) naming the file, the line where known, and the problem for anything else:
-/// not YAML, wrong format tag, unsupported version, missing or unknown keys, wrong types, sizes
+/// not YAML, wrong format tag, unsupported version, missing, unknown or repeated keys, wrong
+/// types, sizes
 /// above 16384 x 16384 or 2^24 pixels, a matrix whose shape differs from width x height,
 /// non-finite numbers, offsets beyond ±L/2, or files over 256 MiB.
 [[nodiscard]] OffsetCalibration LoadCalibration(const std::filesystem::path& path);

@@ -125,7 +125,8 @@ struct ImportedSequence {
 [[nodiscard]] std::vector<std::string> ImportFormats();
 
 /// Serves an imported sequence as a Camera: Grab() returns the frames in order, then
-/// std::nullopt (or starts again when `loop`). Like PlaybackCamera, setters throw
+/// std::nullopt (or starts again when `loop`, continuing the timestamps and sequence numbers:
+/// LoopContinuation). Like PlaybackCamera, setters throw
 /// Error(kUnsupported) unless the value equals the one of the next frame.
 class ImportedCamera final : public Camera {
  public:
@@ -156,6 +157,7 @@ class ImportedCamera final : public Camera {
 
   ImportedSequence sequence_;
   bool loop_;
+  LoopContinuation continuation_;  // what each further pass of a looped sequence adds
   std::size_t next_ = 0;
 };
 

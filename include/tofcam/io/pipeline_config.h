@@ -16,8 +16,9 @@
 namespace tofcam {
 
 /// Parses configuration text; `source` names it in messages. Throws Error(kFormat) naming the
-/// source, the line and the key for malformed YAML, unknown keys, wrong types (e.g. a string
-/// where a number belongs, a fraction for an integer) and unknown flag or controller names, and
+/// source, the line and the key for malformed YAML, unknown keys, a key given twice in one
+/// mapping, wrong types (e.g. a string, quoted numbers included, where a number belongs, a
+/// fraction for an integer) and unknown flag or controller names, and
 /// Error(kInvalidArgument) naming the source and field for values out of range
 /// (PipelineOptions::Validate). A relative `calibration.file` is resolved against `base_dir`
 /// (unless `base_dir` is empty); the file is not read here. When `given_keys` is not null it

@@ -55,7 +55,9 @@ class RecordingWriter {
   /// Appends one frame. The frame must match the camera's size (kMismatch otherwise), pass
   /// ValidateFrame (kInvalidArgument), and have source flags, confidence, ground truth and the
   /// truth's footprint iff the first frame had them (kMismatch); ground truth needs sigma_m
-  /// (kMismatch). Throws Error(kIo) on write failure and Error(kInvalidArgument) after Close().
+  /// (kMismatch). Its timestamp may not be before the previous frame's (kInvalidArgument: the
+  /// reader would refuse the file; the frames appended before stay readable). Throws
+  /// Error(kIo) on write failure and Error(kInvalidArgument) after Close().
   void Append(const Frame& frame);
   /// Flushes and closes; further Append() calls throw. Idempotent.
   void Close();
@@ -119,7 +121,8 @@ struct PlaybackOptions {
   bool real_time = false;
   /// Real-time speed factor (> 0, finite): 2 plays twice as fast. Ignored unless real_time.
   double speed = 1.0;
-  /// Start again at frame 0 after the last frame instead of ending.
+  /// Start again at frame 0 after the last frame instead of ending. Each further pass continues
+  /// the timestamps and sequence numbers of the one before (LoopContinuation).
   bool loop = false;
 
   /// Throws Error(kInvalidArgument) naming the field when out of range.
@@ -127,7 +130,8 @@ struct PlaybackOptions {
 };
 
 /// Serves a recording as a Camera, frame-exactly: Grab() returns the recorded frames unchanged,
-/// then std::nullopt (unless looping).
+/// then std::nullopt (unless looping: then the first pass unchanged, the next ones with their
+/// timestamps and sequence numbers continued).
 ///
 /// Settings: a recording cannot change what was recorded, so SetIntegrationTimeRegister,
 /// SetModulationFrequencyHz, SetDistanceOffsetRegister and SetPanAngleRad throw
@@ -170,6 +174,7 @@ class PlaybackCamera final : public Camera {
   // Real-time pacing: wall-clock time and recorded timestamp of the first frame after a (re)start.
   std::optional<std::chrono::steady_clock::time_point> start_wall_;
   std::int64_t start_timestamp_ns_ = 0;
+  LoopContinuation loop_;  // what each further pass of a looped playback adds
 };
 
 }  // namespace tofcam

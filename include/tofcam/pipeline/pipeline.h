@@ -172,8 +172,11 @@ class Pipeline {
   Pipeline& operator=(Pipeline&&) noexcept;
 
   /// Runs every stage on `frame` into `result` (see PipelineResult). Throws Error(kMismatch) when
-  /// the frame's size or modulation frequency differs from the camera's, and
-  /// Error(kInvalidArgument) for an inconsistent frame.
+  /// the frame's size differs from the camera's or, in a calibrated pipeline, its modulation
+  /// frequency from the one its calibration was made for (the camera's, or with
+  /// `alternate_modulation_frequency_hz` the alternate calibration's for a frame at another
+  /// frequency); an uncalibrated pipeline converts every frame with the frame's own frequency.
+  /// Throws Error(kInvalidArgument) for an inconsistent frame.
   void Process(const Frame& frame, PipelineResult& result);
   /// Same, into a fresh result.
   [[nodiscard]] PipelineResult Process(const Frame& frame);

@@ -96,7 +96,8 @@ struct Scene {
 using SceneOverrides = std::map<std::string, std::string>;
 
 /// Parses scene YAML. `source` names the text in messages; relative mesh paths resolve against
-/// `base_dir`. Throws Error(kFormat) naming source, line and problem; Error(kInvalidArgument) for
+/// `base_dir`. Throws Error(kFormat) naming source, line and problem (a key repeated within one
+/// mapping too); Error(kInvalidArgument) for
 /// an override that is not a declared parameter or not a number.
 [[nodiscard]] Scene ParseScene(std::string_view yaml_text, const std::string& source,
                                const std::filesystem::path& base_dir,
@@ -123,7 +124,10 @@ using SceneOverrides = std::map<std::string, std::string>;
 [[nodiscard]] std::pair<std::string, SceneOverrides> ParseSceneSpec(const std::string& spec);
 
 /// Reads a triangle mesh from OBJ (tinyobjloader) or PLY (ASCII or binary little-endian; vertex
-/// x, y, z and face vertex_indices). Throws Error(kNotFound) / Error(kFormat) naming the file.
+/// x, y, z and face vertex_indices). Throws Error(kNotFound) / Error(kFormat) naming the file
+/// (and for OBJ the line): also for a coordinate that is not a finite float and, in OBJ, for a
+/// vertex without 3 coordinates or a face index that is not a whole number naming a vertex
+/// defined before it.
 void LoadMesh(const std::filesystem::path& path, std::vector<Eigen::Vector3f>& vertices,
               std::vector<Eigen::Vector3i>& triangles);
 
