@@ -29,7 +29,8 @@ using CameraFactory =
 struct CameraSourceKind {
   std::string help;  ///< One line for --help, e.g. "sim:<scene|file.yaml>  simulated camera".
   CameraFactory factory;
-  /// false: Grab() may never run out (a simulator, a live stream), so "all frames" is no count.
+  /// false: Grab() never runs out (the simulator), so "all frames" is no count. (A ROS 2 stream
+  /// ends when no frame comes within its timeout.)
   bool ends = true;
 };
 

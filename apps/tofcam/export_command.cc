@@ -138,8 +138,7 @@ void SetupExportCommand(CLI::App& app) {
                   "csv (one row per pixel)")
       ->required();
   sub->add_option("--first", o->first, "First frame index")->capture_default_str();
-  sub->add_option("--count", o->count,
-                  "Number of frames (-1 = all; a sim: or ros2: source needs a count)")
+  sub->add_option("--count", o->count, "Number of frames (-1 = all; a sim: source needs a count)")
       ->capture_default_str();
   sub->add_flag("--only-valid", o->only_valid, "PLY/PCD: write valid points only");
   sub->callback([o] { RunExport(*o); });

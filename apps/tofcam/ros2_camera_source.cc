@@ -13,7 +13,7 @@ std::unique_ptr<Camera> OpenRos2Camera(const std::string& rest, const CameraSour
   return std::make_unique<ros2::Ros2Camera>(ros2::ParseRos2CameraSpec(rest, o.ros2_domain));
 }
 
-TOFCAM_REGISTER_ENDLESS_CAMERA_SOURCE(
+TOFCAM_REGISTER_CAMERA_SOURCE(
     "ros2",
     "ros2:<namespace>[?driver=tofcam|azure-kinect|ifm3d|royale&depth=..&amplitude=..&...]  "
     "ROS 2 ToF driver topics over DDS (domain: --ros2-domain)",

@@ -106,8 +106,11 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
   }
   const double f1 = previous.info.modulation_frequency_hz;
   const double f2 = current.info.modulation_frequency_hz;
-  if (!(f1 > 0.0) || !(f2 > 0.0) || !std::isfinite(f1) || !std::isfinite(f2)) {
-    Bad("frame pair: modulation frequencies must be finite and > 0");
+  // Up to 1 GHz (CW ToF cameras modulate at tens to a few hundred MHz): the wrap search tries
+  // every count up to max_range_m / L, which a far higher frequency would make endless.
+  constexpr double kMaxFrequencyHz = 1e9;
+  if (!(f1 > 0.0 && f1 <= kMaxFrequencyHz) || !(f2 > 0.0 && f2 <= kMaxFrequencyHz)) {
+    Bad("frame pair: modulation frequencies must be in (0, 1 GHz]");
   }
   const double l1 = UnambiguousRangeM(f1), l2 = UnambiguousRangeM(f2);
   const bool dual = f1 != f2;

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -285,55 +286,90 @@ void LoadPly(const std::filesystem::path& path, Verts& verts, Tris& tris) {
   if (!have_vertices) PlyFail(path, "no vertex element");
 }
 
-// tinyobjloader reads what it cannot parse as 0 ("v abc 1 2", "v nan 1 2"), accepts a vertex with
-// two coordinates and wraps a face index beyond int ("f 1 2 99999999999999999999") into range, so
-// a malformed mesh would render as a different one. The vertex and face lines are checked here
-// first: a vertex is 3 (or 4 with w, or 6 with a colour) finite float numbers, a face at least 3
-// vertex references whose index (before any '/') is a whole number within the vertices so far,
-// counted from the end when negative (OBJ's relative indices).
-void CheckObjText(const std::filesystem::path& path, const std::string& text) {
+// tinyobjloader reads what it cannot parse as 0 ("v abc 1 2", "v nan 1 2", "v 0x1p3 1 2"),
+// accepts a vertex with two coordinates and wraps a face index beyond int
+// ("f 1 2 99999999999999999999") into range, so a malformed mesh would render as a different
+// one. The vertex and face lines are checked here first: a vertex is 3 (or 4 with w, or 6 with a
+// colour) decimal numbers within the float range (tiny ones that round to 0 included), a face at
+// least 3 vertex references whose index (before any '/') is a whole number naming a vertex: 1 to
+// the file's vertex count, or counted back from the last vertex so far when negative (OBJ's
+// relative indices). Line ends may be LF, CRLF or CR; '#' starts a comment.
+bool ObjNumberOk(const std::string& t) {
+  double x = 0.0;
+  const char* begin = t.data() + (t.size() > 1 && t[0] == '+' && t[1] != '-' ? 1 : 0);
+  const char* end = t.data() + t.size();
+  const auto [ptr, ec] = std::from_chars(begin, end, x);  // decimal only, no locale
+  if (ptr != end) return false;
+  if (ec == std::errc::result_out_of_range) {
+    // Underflow (1e-320) is a number that rounds to 0; overflow is not one.
+    const auto e = t.find_first_of("eE");
+    return e != std::string::npos && e + 1 < t.size() && t[e + 1] == '-';
+  }
+  return ec == std::errc() && std::isfinite(x) && std::abs(x) <= std::numeric_limits<float>::max();
+}
+
+void CheckObjText(const std::filesystem::path& path, std::string text) {
   const auto fail = [&](std::size_t line, const std::string& problem) {
     throw Error(ErrorCode::kFormat,
                 path.string() + ":" + std::to_string(line) + ": OBJ: " + problem);
   };
-  long long vertices = 0;
+  // CRLF to LF, then a lone CR (old Mac files) to LF: the line numbers stay those of the file.
+  std::string unified;
+  unified.reserve(text.size());
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    if (text[i] != '\r') {
+      unified += text[i];
+    } else if (i + 1 >= text.size() || text[i + 1] != '\n') {
+      unified += '\n';
+    }
+  }
+  text.swap(unified);
+  // Each line's kind and tokens, comments dropped; then the file's vertex count.
+  const auto tokens_of = [](const std::string& line) {
+    std::istringstream in(line.substr(0, line.find('#')));
+    std::vector<std::string> tokens;
+    for (std::string t; in >> t;) tokens.push_back(t);
+    return tokens;
+  };
+  long long total = 0;
+  {
+    std::istringstream lines(text);
+    for (std::string line; std::getline(lines, line);) {
+      const auto tokens = tokens_of(line);
+      total += !tokens.empty() && tokens[0] == "v";
+    }
+  }
+  long long vertices = 0;  // defined so far
   std::istringstream lines(text);
   std::string line;
   for (std::size_t number = 1; std::getline(lines, line); ++number) {
-    line = line.substr(0, line.find('#'));  // the rest is a comment
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream in(line);
-    std::string kind;
-    if (!(in >> kind) || (kind != "v" && kind != "f")) continue;
-    std::vector<std::string> tokens;
-    for (std::string t; in >> t;) tokens.push_back(t);
-    if (kind == "v") {
-      if (tokens.size() != 3 && tokens.size() != 4 && tokens.size() != 6) {
-        fail(number,
-             "a vertex needs 3 coordinates, got " + std::to_string(tokens.size()) + " numbers");
+    const std::vector<std::string> tokens = tokens_of(line);
+    if (tokens.empty() || (tokens[0] != "v" && tokens[0] != "f")) continue;
+    const std::size_t n = tokens.size() - 1;
+    if (tokens[0] == "v") {
+      if (n != 3 && n != 4 && n != 6) {
+        fail(number, "a vertex needs 3 coordinates, got " + std::to_string(n) + " numbers");
       }
-      for (const std::string& t : tokens) {
-        char* end = nullptr;
-        errno = 0;
-        const double x = std::strtod(t.c_str(), &end);
-        if (end != t.c_str() + t.size() || errno == ERANGE || !std::isfinite(x) ||
-            std::abs(x) > std::numeric_limits<float>::max()) {
-          fail(number, "vertex coordinate '" + t + "' is not a finite number");
+      for (std::size_t k = 1; k <= n; ++k) {
+        if (!ObjNumberOk(tokens[k])) {
+          fail(number, "vertex coordinate '" + tokens[k] + "' is not a finite decimal number");
         }
       }
       ++vertices;
       continue;
     }
-    if (tokens.size() < 3) fail(number, "a face needs at least 3 vertices");
-    for (const std::string& t : tokens) {
-      const std::string index = t.substr(0, t.find('/'));
-      char* end = nullptr;
-      errno = 0;
-      const long long k = std::strtoll(index.c_str(), &end, 10);
-      if (index.empty() || end != index.c_str() + index.size() || errno == ERANGE || k == 0 ||
-          k > vertices || k < -vertices) {
-        fail(number, "face vertex '" + t + "' is not one of the " + std::to_string(vertices) +
-                         " vertices so far");
+    if (n < 3) fail(number, "a face needs at least 3 vertices");
+    for (std::size_t k = 1; k <= n; ++k) {
+      const std::string index = tokens[k].substr(0, tokens[k].find('/'));
+      long long v = 0;
+      const char* end = index.data() + index.size();
+      const auto [ptr, ec] = std::from_chars(index.data(), end, v);
+      const bool ok = !index.empty() && ec == std::errc() && ptr == end &&
+                      ((v > 0 && v <= total) || (v < 0 && -v <= vertices));
+      if (!ok) {
+        fail(number, "face vertex '" + tokens[k] + "' is not one of the file's " +
+                         std::to_string(total) + " vertices (" + std::to_string(vertices) +
+                         " before this line)");
       }
     }
   }
@@ -343,13 +379,14 @@ void LoadObj(const std::filesystem::path& path, Verts& verts, Tris& tris) {
   if (!std::filesystem::exists(path)) {
     throw Error(ErrorCode::kNotFound, path.string() + ": mesh file not found");
   }
-  CheckObjText(path, ReadFile(path, std::size_t{1} << 30));
+  const std::string text = ReadFile(path, std::size_t{1} << 30);
+  CheckObjText(path, text);
   tinyobj::ObjReaderConfig config;
   config.triangulate = true;
   config.vertex_color = false;
   config.mtl_search_path = "";
   tinyobj::ObjReader reader;
-  if (!reader.ParseFromFile(path.string(), config)) {
+  if (!reader.ParseFromString(text, "", config)) {
     std::string msg = reader.Error();
     while (!msg.empty() && (msg.back() == '\n' || msg.back() == '\r')) msg.pop_back();
     std::replace(msg.begin(), msg.end(), '\n', ' ');

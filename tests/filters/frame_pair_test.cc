@@ -338,7 +338,7 @@ TEST(FramePair, BadInputIsAClearError) {
   MetricFrame b = Pixels(17e6, 1, 1, 0.01f);
   b.delta_l_m = Image<float>();
   EXPECT_THROW(CombineFramePair(a, b), Error);
-  for (double bad : {0.0, -17e6, std::numeric_limits<double>::infinity(), std::nan("")}) {
+  for (double bad : {0.0, -17e6, 1e15, std::numeric_limits<double>::infinity(), std::nan("")}) {
     MetricFrame c = Pixels(17e6, 1, 1, 0.01f);
     c.info.modulation_frequency_hz = bad;
     EXPECT_THROW(CombineFramePair(a, c), Error) << bad;

@@ -237,6 +237,17 @@ TEST(PipelineTest, HdrAlternatesTheBaseAndTheLongExposure) {
     o.hdr_exposure_ratio = bad;
     EXPECT_THROW(Pipeline(o, TinyCamera()), Error) << bad;
   }
+
+  // Without HDR, frames that differ only in exposure (a controller's steps) are no pair: a
+  // pixel clipped in the second frame must not take the first frame's value.
+  PipelineOptions pair_only = options;
+  pair_only.hdr_exposure_ratio = 0.0;
+  Pipeline steps(pair_only, TinyCamera());
+  for (const int step_register : {10, 20, 30}) {
+    f.info.integration_time_register = step_register;
+    f.info.integration_time_us = step_register * 255.0;
+    EXPECT_FALSE(steps.Process(f).combined) << step_register;
+  }
 }
 
 TEST(PipelineTest, AccuracyThresholdFlagsExactlyThePixelsAboveIt) {

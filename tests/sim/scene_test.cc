@@ -200,6 +200,9 @@ TEST(SceneTest, LoadsPlyAndObjMeshes) {
            {"v 0 0 2\nv 1 0\nv 0 1 2\nf 1 2 3\n", ":2:", "3 coordinates"},
            {tri + "f 1 2 99999999999999999999\n", ":4:", "99999999999999999999"},
            {tri + "f 1 2 4\n", ":4:", "'4'"},
+           {tri + "f 1 2 -4\n", ":4:", "'-4'"},
+           {"v 0 0 2\nv 0x1p3 0 2\nv 0 1 2\nf 1 2 3\n", ":2:", "'0x1p3'"},
+           {"v 0 0 2\rv abc 0 2\rv 0 1 2\rf 1 2 3\r", ":2:", "'abc'"},  // old Mac line ends
            {tri + "f 1 2 0\n", ":4:", "'0'"},
            {tri + "f 1 2\n", ":4:", "at least 3"},
            {tri + "f 1 2 x\n", ":4:", "'x'"},
@@ -210,17 +213,22 @@ TEST(SceneTest, LoadsPlyAndObjMeshes) {
     EXPECT_NE(msg.find(words), std::string::npos) << msg;
     std::filesystem::remove(bad);
   }
-  // What OBJ allows: relative (negative) indices, texture/normal references, comments, CRLF.
-  const auto fine =
-      TempFile("fine.obj",
-               "# a triangle\r\nv 0 0 2\r\nv 1 0 2 1\r\nv 0 1 2 # third\r\nf -3/1 2//1 3/1/1\r\n");
-  v.clear();
-  t.clear();
-  LoadMesh(fine, v, t);
-  EXPECT_EQ(v.size(), 3u);
-  ASSERT_EQ(t.size(), 1u);
-  EXPECT_EQ(t[0], Eigen::Vector3i(0, 1, 2));
-  std::filesystem::remove(fine);
+  // What OBJ allows: relative (negative) indices, texture/normal references, comments, CRLF,
+  // a face before the vertices it names, '+' signs, exponents (a tiny one rounds to 0).
+  for (const std::string& text :
+       {std::string("# a triangle\r\nv 0 0 2\r\nv 1 0 2 1\r\nv 0 1 2 # third\r\n"
+                    "f -3/1 2//1 3/1/1\r\n"),
+        std::string("f 1 2 3\nv 0 0 2\nv +1 0 2e0\nv 0 1.0e-320 2\n")}) {
+    const auto fine = TempFile("fine.obj", text);
+    v.clear();
+    t.clear();
+    LoadMesh(fine, v, t);
+    EXPECT_EQ(v.size(), 3u) << text;
+    ASSERT_EQ(t.size(), 1u) << text;
+    EXPECT_EQ(t[0], Eigen::Vector3i(0, 1, 2));
+    EXPECT_EQ(v[1], Eigen::Vector3f(1, 0, 2));
+    std::filesystem::remove(fine);
+  }
   std::filesystem::remove(huge);
 
   // A scene referencing a mesh relative to its own folder.

@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "tofcam/io/recording.h"
 #include "tofcam/sim/simulated_camera.h"
 
 namespace tofcam::viewer {
@@ -231,10 +232,22 @@ TEST_F(ViewerServerTest, ControlsApplyToTheNextFrames) {
   ASSERT_TRUE(WaitFrames(3));
   const std::string path = server_->Status().recording;
   EXPECT_FALSE(path.empty()) << server_->Status().last_error;
+  // Other scene parameters while recording: a new simulator, whose clock starts again, so the
+  // file is finished and a second one begun (one file would have decreasing timestamps).
+  ASSERT_EQ(Post(R"({"scene": {"hand_distance_m": 0.5}})", &reply), 200) << reply;
+  ASSERT_TRUE(WaitFrames(3));
+  const std::string second = server_->Status().recording;
+  EXPECT_FALSE(second.empty()) << server_->Status().last_error;
+  EXPECT_NE(second, path);
   ASSERT_EQ(Post(R"({"record": "stop"})"), 200);
   ASSERT_TRUE(WaitFrames(2));
   EXPECT_TRUE(server_->Status().recording.empty());
-  EXPECT_TRUE(std::filesystem::exists(path)) << path;
+  EXPECT_EQ(server_->Status().last_error.find("recording"), std::string::npos)
+      << server_->Status().last_error;
+  for (const std::string& file : {path, second}) {
+    const RecordingReader reader(file);  // refuses decreasing timestamps
+    EXPECT_GE(reader.frame_count(), 1u) << file;
+  }
 }
 
 TEST_F(ViewerServerTest, TheDenoiseToggleLowersTheFramesDeltaL) {

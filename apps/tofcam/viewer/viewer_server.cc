@@ -466,7 +466,13 @@ void ViewerServer::Impl::Loop() {
       desired.record = 0;
       reopened = std::move(desired.camera);
     }
-    if (reopened) camera = std::move(reopened);
+    if (reopened) {
+      camera = std::move(reopened);
+      // A new source (e.g. the simulator with other scene parameters) starts its own clock, so
+      // a recording that went on would have timestamps that decrease, which a recording may
+      // not (RecordingWriter refuses them). The current file is finished and a new one begun.
+      if (recorder) record = 2;
+    }
     if (pan) {
       try {
         camera->SetPanAngleRad(*pan);
@@ -475,18 +481,8 @@ void ViewerServer::Impl::Loop() {
         status.last_error = e.what();
       }
     }
-    if (record > 0 && !recorder) {
-      try {
-        std::filesystem::create_directories(options.record_dir);
-        recording_path =
-            (options.record_dir / ("view_" + std::to_string(std::time(nullptr)) + ".h5")).string();
-        recorder = std::make_unique<RecordingWriter>(recording_path, info);
-      } catch (const std::exception& e) {
-        std::lock_guard<std::mutex> lock(frame_mutex);
-        status.last_error = std::string("recording: ") + e.what();
-        recording_path.clear();
-      }
-    } else if (record < 0 && recorder) {
+    // record: 1 start, -1 stop, 2 finish the current file and start the next.
+    if ((record < 0 || record == 2) && recorder) {
       try {
         recorder->Close();
       } catch (const Error& e) {
@@ -495,6 +491,24 @@ void ViewerServer::Impl::Loop() {
       }
       recorder.reset();
       recording_path.clear();
+    }
+    if (record > 0 && !recorder) {
+      try {
+        std::filesystem::create_directories(options.record_dir);
+        // view_<unix time>.h5, or _2, _3, ... after it: a second file in the same second must
+        // not overwrite the first.
+        const std::string stem = "view_" + std::to_string(std::time(nullptr));
+        std::filesystem::path path = options.record_dir / (stem + ".h5");
+        for (int k = 2; std::filesystem::exists(path); ++k) {
+          path = options.record_dir / (stem + "_" + std::to_string(k) + ".h5");
+        }
+        recording_path = path.string();
+        recorder = std::make_unique<RecordingWriter>(recording_path, info);
+      } catch (const std::exception& e) {
+        std::lock_guard<std::mutex> lock(frame_mutex);
+        status.last_error = std::string("recording: ") + e.what();
+        recording_path.clear();
+      }
     }
     {
       std::lock_guard<std::mutex> lock(frame_mutex);

@@ -79,8 +79,8 @@ struct FramePairOptions {
 /// (the pipeline's accuracy stage). Pixels with a reject flag in one frame take the other's
 /// value and flags minus that frame's reject bits (HDR: a clipped pixel is replaced) — except
 /// with two frequencies, where one frame alone cannot be unwrapped: such pixels keep their
-/// flags and get kInconsistent. Throws Error(kInvalidArgument) for bad options, empty ΔL, or
-/// frames of different sizes.
+/// flags and get kInconsistent. Throws Error(kInvalidArgument) for bad options, empty ΔL,
+/// frames of different sizes, or a modulation frequency outside (0, 1 GHz].
 void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
                       const FramePairOptions& options = {});
 

@@ -155,8 +155,11 @@ class PlaybackCamera final : public Camera {
   [[nodiscard]] double PanAngleRad() const override;
 
   /// Makes frame `index` the next one Grab() returns (kInvalidArgument unless < frame_count()).
+  /// In a looped playback the passes served so far keep counting: frames after a seek carry
+  /// the current pass's continued timestamps.
   void Seek(std::size_t index);
-  /// Seeks to the first frame with timestamp >= `timestamp_ns` (kInvalidArgument if none).
+  /// Seeks to the first frame with recorded timestamp >= `timestamp_ns` (kInvalidArgument if
+  /// none): the times in the file, not the continued ones of a later pass.
   void SeekToTimeNs(std::int64_t timestamp_ns);
   /// Index of the next frame Grab() returns.
   [[nodiscard]] std::size_t position() const noexcept { return next_; }
