@@ -51,7 +51,10 @@ void BindRecordings(py::module_& m) {
             py::gil_scoped_release release;
             w.Append(f);
           },
-          py::arg("frame"), "Appends one frame (GIL released).")
+          py::arg("frame"),
+          "Appends one frame (GIL released). A frame of another size or shape of channels, or "
+          "with a timestamp before the previous frame's (the reader would refuse the file), is "
+          "refused; the frames before stay readable.")
       .def("close", &RecordingWriter::Close, "Flushes and closes; idempotent.")
       .def("__len__", &RecordingWriter::frame_count)
       .def_property_readonly("path", &RecordingWriter::path)
