@@ -729,7 +729,7 @@ class RunCommandTest : public ::testing::Test {
   // Runs the CLI with `args`; returns its exit status, stdout in `output`.
   int Run(const std::string& args, std::string* output = nullptr) {
     const fs::path out_file = dir_ / "stdout.txt";
-    const std::string command = std::string(TOFCAM_CLI_PATH) + " " + args + " >" +
+    const std::string command = env_ + std::string(TOFCAM_CLI_PATH) + " " + args + " >" +
                                 out_file.string() + " 2>" + (dir_ / "stderr.txt").string();
     const int status = std::system(command.c_str());
     if (output != nullptr) {
@@ -747,6 +747,7 @@ class RunCommandTest : public ::testing::Test {
     return text.str();
   }
   fs::path dir_;
+  std::string env_;  // put before the command, e.g. "ASAN_OPTIONS=... "
 };
 
 std::vector<std::map<std::string, std::string>> ReadCsv(const fs::path& path) {
@@ -955,6 +956,10 @@ TEST_F(RunCommandTest, ADamagedRecordingIsOneLineOfError) {
     bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
   }
   ASSERT_GT(bytes.size(), 100u);
+  // libhdf5 leaks the damaged file's objects it cannot close (fuzz/lsan.supp says the same for
+  // the fuzzers); with its atexit cleanup off, the sanitizer build's leak check would abort on
+  // them. The test is about the message, so leak checking is off for these runs.
+  env_ = "ASAN_OPTIONS=detect_leaks=0 ";
   for (const std::size_t at : {56u, 63u, 70u}) {
     std::string damaged = bytes;
     damaged[at] = static_cast<char>(0xBD);
