@@ -471,7 +471,7 @@ void ViewerServer::Impl::Loop() {
       // A new source (e.g. the simulator with other scene parameters) starts its own clock, so
       // a recording that went on would have timestamps that decrease, which a recording may
       // not (RecordingWriter refuses them). The current file is finished and a new one begun.
-      if (recorder) record = 2;
+      if (recorder && record >= 0) record = 2;  // unless the same request stops recording
     }
     if (pan) {
       try {
