@@ -126,8 +126,8 @@ using SceneOverrides = std::map<std::string, std::string>;
 /// Reads a triangle mesh from OBJ (tinyobjloader) or PLY (ASCII or binary little-endian; vertex
 /// x, y, z and face vertex_indices). Throws Error(kNotFound) / Error(kFormat) naming the file
 /// (and for OBJ the line): also for a coordinate that is not a finite float and, in OBJ, for a
-/// vertex without 3 coordinates or a face index that is not a whole number naming a vertex
-/// defined before it.
+/// vertex without 3 coordinates or a face index that is not a whole number naming one of the
+/// file's vertices (a negative, relative index: one defined before the face).
 void LoadMesh(const std::filesystem::path& path, std::vector<Eigen::Vector3f>& vertices,
               std::vector<Eigen::Vector3i>& triangles);
 
