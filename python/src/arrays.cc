@@ -9,7 +9,9 @@ py::array CheckArray(py::handle object, const char* name, const py::dtype& dtype
                          ", got " + std::string(py::str(py::type::of(object).attr("__name__"))));
   }
   py::array a = py::reinterpret_borrow<py::array>(object);
-  if (!a.dtype().is(dtype)) {
+  // Equivalent, not the same object: an array that went through pickle or another process has
+  // its own dtype instance. Byte order still counts ('>f4' is not float32 here).
+  if (py::detail::npy_api::get().PyArray_EquivTypes_(a.dtype().ptr(), dtype.ptr()) == 0) {
     throw py::type_error(std::string(name) + " must have dtype " + dtype_name + ", got " +
                          std::string(py::str(a.dtype())) + " (convert with .astype(np." +
                          dtype_name + "))");

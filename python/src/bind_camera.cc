@@ -38,7 +38,17 @@ void SetFields(py::object options, const py::kwargs& kwargs, const char* what) {
         py::isinstance<py::function>(options.attr(key))) {
       throw py::type_error(std::string(what) + " has no option '" + name + "'");
     }
-    options.attr(key) = value;
+    try {
+      options.attr(key) = value;
+    } catch (py::error_already_set& e) {
+      // pybind's setter message ("incompatible function arguments ... arg0: int") names
+      // neither the option nor the value; the option's current value shows the type it takes.
+      if (!e.matches(PyExc_TypeError)) throw;
+      const py::object current = options.attr(key);
+      throw py::type_error(std::string(what) + " option '" + name + "' takes a " +
+                           std::string(py::str(py::type::of(current).attr("__name__"))) +
+                           " (in its range), got " + std::string(py::repr(value)));
+    }
   }
 }
 
@@ -127,7 +137,8 @@ void BindScenes(py::module_& m) {
 void BindSimulatorOptions(py::module_& m) {
   using O = sim::SimulatorOptions;
   py::class_<O>(m, "SimulatorOptions",
-                "Which simulator effects run and how (defaults: everything on). Every field is "
+                "Which simulator effects run and how (defaults: every physical effect on; "
+                "interreflection and the planar shortcut off). Every field is "
                 "also a keyword argument of SimulatedCamera.")
       .def(py::init([](const py::kwargs& kwargs) {
              py::object o = py::cast(O{});
@@ -180,8 +191,8 @@ void BindCameras(py::module_& m) {
       "A continuous-wave ToF camera. grab() returns the next Frame or None at the end of a "
       "finite source; iterating a camera grabs until the end.")
       .def("grab", &GrabFrame, "The next frame (GIL released while grabbing), or None at the end.")
-      .def_property_readonly("info", &Camera::Info, py::return_value_policy::reference_internal,
-                             "CameraInfo.")
+      .def_property_readonly("info", &Camera::Info, py::return_value_policy::copy,
+                             "CameraInfo (a copy: changing it does not change the camera).")
       .def_property("integration_time_register", &Camera::IntegrationTimeRegister,
                     &Camera::SetIntegrationTimeRegister,
                     "Register for the next frame, in [info.min_integration_register, "
@@ -218,9 +229,12 @@ void BindCameras(py::module_& m) {
            "scene: a Scene, a built-in name ('hand', 'pavilion?distance_m=2', ...) or a YAML "
            "path; model: a CameraModel, a built-in name or a YAML path; further keyword "
            "arguments set SimulatorOptions fields (seed=, supersampling=, threads=, ...).")
-      .def_property_readonly("scene", &sim::SimulatedCamera::scene)
-      .def_property_readonly("model", &sim::SimulatedCamera::model)
-      .def_property_readonly("options", &sim::SimulatedCamera::options)
+      .def_property_readonly("scene", &sim::SimulatedCamera::scene, py::return_value_policy::copy,
+                             "Scene (a copy: changing it does not change the camera).")
+      .def_property_readonly("model", &sim::SimulatedCamera::model, py::return_value_policy::copy,
+                             "CameraModel (a copy).")
+      .def_property_readonly("options", &sim::SimulatedCamera::options,
+                             py::return_value_policy::copy, "SimulatorOptions (a copy).")
       .def_property_readonly("next_exposure_start_s", &sim::SimulatedCamera::NextExposureStartS,
                              "Start of the next exposure, s since the camera was opened.")
       .def_property_readonly(
@@ -280,7 +294,24 @@ PySequence ToPy(ImportedSequence&& s) {
   return out;
 }
 
+// Every frame present and of the camera's size: the constructor's and the setters' check.
+void CheckSequence(const CameraInfo& camera, const std::vector<std::shared_ptr<Frame>>& frames) {
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    if (!frames[i]) {
+      throw py::type_error("frames must be tofcam.Frame objects (frame " + std::to_string(i) +
+                           " is None)");
+    }
+    if (frames[i]->width() != camera.width() || frames[i]->height() != camera.height()) {
+      throw Error(ErrorCode::kMismatch,
+                  "frame " + std::to_string(i) + " is " + std::to_string(frames[i]->width()) + "x" +
+                      std::to_string(frames[i]->height()) + ", the camera " +
+                      std::to_string(camera.width()) + "x" + std::to_string(camera.height()));
+    }
+  }
+}
+
 ImportedSequence FromPy(const PySequence& s) {
+  CheckSequence(s.camera, s.frames);
   ImportedSequence out{s.camera, {}, s.delta_l_scale, s.delta_l_scale_note};
   for (const auto& f : s.frames) out.frames.push_back(*f);
   return out;
@@ -301,19 +332,27 @@ void BindImporters(py::module_& m) {
                          "A real camera's frames as an importer read them (docs/importers.md).")
       .def(py::init([](const CameraInfo& camera, std::vector<std::shared_ptr<Frame>> frames,
                        std::optional<double> delta_l_scale, const std::string& note) {
-             for (const auto& f : frames) {
-               if (!f) throw py::type_error("frames must be tofcam.Frame objects");
-               if (f->width() != camera.width() || f->height() != camera.height()) {
-                 throw Error(ErrorCode::kMismatch, "a frame's size differs from the camera's");
-               }
-             }
+             CheckSequence(camera, frames);
              return PySequence{camera, std::move(frames), delta_l_scale, note};
            }),
            py::arg("camera"), py::arg("frames"), py::arg("delta_l_scale") = py::none(),
            py::arg("delta_l_scale_note") = "",
            "A sequence of frames to serve with ImportedCamera (e.g. frames made in Python).")
-      .def_readwrite("camera", &PySequence::camera, "CameraInfo.")
-      .def_readwrite("frames", &PySequence::frames, "list of Frame.")
+      .def_property(
+          "camera", [](const PySequence& s) { return s.camera; },
+          [](PySequence& s, const CameraInfo& camera) {
+            CheckSequence(camera, s.frames);
+            s.camera = camera;
+          },
+          "CameraInfo (a copy; assigning one checks the frames' size against it).")
+      .def_property(
+          "frames", [](const PySequence& s) { return s.frames; },
+          [](PySequence& s, std::vector<std::shared_ptr<Frame>> frames) {
+            CheckSequence(s.camera, frames);
+            s.frames = std::move(frames);
+          },
+          "list of Frame: a new list each time (appending to it changes nothing); assign a "
+          "list to replace the frames, checked as by the constructor.")
       .def_readwrite("delta_l_scale", &PySequence::delta_l_scale,
                      "Noise scale of the camera's ΔL where the importer knows it, else None.")
       .def_readwrite("delta_l_scale_note", &PySequence::delta_l_scale_note)

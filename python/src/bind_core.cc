@@ -91,7 +91,13 @@ void BindErrors(py::module_& m) {
     } catch (const Error& error) {
       const auto index = static_cast<std::size_t>(error.code());
       py::object cls = index < 7 ? Errors().by_code[index] : Errors().base;
-      py::object instance = cls(error.what());
+      // Messages quote paths and file contents, which need not be UTF-8: undecodable bytes
+      // become escapes instead of a UnicodeDecodeError in place of the tofcam error.
+      const std::string what = error.what();
+      py::object message = py::reinterpret_steal<py::object>(PyUnicode_DecodeUTF8(
+          what.data(), static_cast<Py_ssize_t>(what.size()), "backslashreplace"));
+      if (!message) throw py::error_already_set();
+      py::object instance = cls(message);
       instance.attr("code") = std::string(ErrorCodeName(error.code()));
       PyErr_SetObject(cls.ptr(), instance.ptr());
     }
@@ -234,12 +240,40 @@ void BindInfo(py::module_& m) {
 
 // Channels as properties: a getter returning a zero-copy view (None when the channel is empty)
 // and a setter copying into the existing buffer (same shape, exact dtype).
+// The size every channel of an object must have, (0, 0) when nothing fixes it yet.
+std::pair<int, int> ChannelSize(const Frame& f) { return {f.width(), f.height()}; }
+std::pair<int, int> ChannelSize(const MetricFrame& f) { return {f.width(), f.height()}; }
+std::pair<int, int> ChannelSize(const GroundTruth& t) {
+  return {t.radial_distance_m.width(), t.radial_distance_m.height()};
+}
+
 template <typename Class, typename T>
 void Channel(py::class_<Class, std::shared_ptr<Class>>& cls, const char* name,
              Image<T> Class::*member, const char* doc) {
   cls.def_property(
       name, [member](py::object self) { return View(self.cast<Class&>().*member, self); },
-      [member, name](Class& self, py::object value) { Assign(self.*member, value, name); }, doc);
+      [member, name](Class& self, py::object value) {
+        if (value.is_none()) {
+          // Freeing the buffer would leave views of it pointing at freed memory.
+          throw py::type_error(std::string(name) +
+                               " cannot be removed (set to None); make a new frame without it");
+        }
+        Image<T>& image = self.*member;
+        const auto [w, h] = ChannelSize(self);
+        if (image.empty() && w > 0) {
+          // A channel the object did not have yet takes the object's size, not any size.
+          const py::array a =
+              CheckArray(value, name, py::dtype::of<typename Element<T>::type>(),
+                         DtypeName<typename Element<T>::type>(), Element<T>::kChannels);
+          if (a.shape(0) != h || a.shape(1) != w) {
+            throw py::value_error(std::string(name) + " has shape (" + std::to_string(a.shape(0)) +
+                                  ", " + std::to_string(a.shape(1)) + "), the frame is (" +
+                                  std::to_string(h) + ", " + std::to_string(w) + ")");
+          }
+        }
+        Assign(image, value, name);
+      },
+      doc);
 }
 
 std::string FrameRepr(const char* name, int width, int height, const FrameInfo& info, bool truth) {

@@ -88,13 +88,21 @@ void BindRecordings(py::module_& m) {
              py::object getitem = py::cast(r).attr("__getitem__");
              return builtins.attr("map")(getitem, builtins.attr("range")(r->frame_count()));
            })
-      .def("info", &RecordingReader::Info, py::arg("index"),
-           py::return_value_policy::reference_internal,
-           "FrameInfo of frame `index` without reading its images.")
+      .def(
+          "info",
+          [](const RecordingReader& r, std::int64_t index) {
+            const auto n = static_cast<std::int64_t>(r.frame_count());
+            if (index < 0) index += n;
+            if (index < 0 || index >= n) throw py::index_error("frame index out of range");
+            return r.Info(static_cast<std::size_t>(index));  // a copy
+          },
+          py::arg("index"),
+          "FrameInfo of frame `index` without reading its images (a copy; negative indices "
+          "count from the end, as reader[i]).")
       .def("index_at_or_after", &RecordingReader::IndexAtOrAfter, py::arg("timestamp_ns"),
            "Index of the first frame at or after a timestamp (len() if none).")
-      .def_property_readonly("metadata", &RecordingReader::metadata,
-                             py::return_value_policy::reference_internal)
+      .def_property_readonly("metadata", &RecordingReader::metadata, py::return_value_policy::copy,
+                             "RecordingMetadata (a copy).")
       .def_property_readonly("path", &RecordingReader::path)
       .def("__repr__", [](const RecordingReader& r) {
         return Repr("RecordingReader", {"path='" + r.path().string() + "'",
@@ -157,13 +165,23 @@ void BindCalibration(py::module_& m) {
         o.frames = frames;
         for (const auto& [k, v] : kwargs) {
           const std::string key = py::str(k);
+          // pybind's own cast error names neither the option nor the type it wants.
+          const auto as_int = [&key](py::handle value) {
+            if (!py::isinstance<py::int_>(value) || py::isinstance<py::bool_>(value)) {
+              throw py::type_error("calibrate() option '" + key + "' must be an int");
+            }
+            return value.cast<int>();
+          };
           if (key == "warmup_max_frames") {
-            o.warmup_max_frames = v.cast<int>();
+            o.warmup_max_frames = as_int(v);
           } else if (key == "warmup_window_frames") {
-            o.warmup_window_frames = v.cast<int>();
+            o.warmup_window_frames = as_int(v);
           } else if (key == "controller_max_frames") {
-            o.controller_max_frames = v.cast<int>();
+            o.controller_max_frames = as_int(v);
           } else if (key == "min_valid_fraction") {
+            if (!py::isinstance<py::float_>(v) && !py::isinstance<py::int_>(v)) {
+              throw py::type_error("calibrate() option '" + key + "' must be a number");
+            }
             o.min_valid_fraction = v.cast<double>();
           } else {
             throw py::type_error("calibrate() has no option '" + key + "'");

@@ -24,6 +24,37 @@ namespace tofcam::python {
 
 namespace {
 
+// `out=` is filled in place only when this frame has its size and channels and the pipeline
+// keeps the channels it has (Pipeline::Process); otherwise Process would replace a buffer that
+// a NumPy view of `out` may still point into. A never-filled result takes any frame.
+void CheckReusable(const Pipeline& pipeline, const Frame& frame, const PipelineResult& out) {
+  const MetricFrame& m = out.frame;
+  if (m.radial_distance_m.empty()) return;
+  std::string other;
+  if (m.width() != frame.width() || m.height() != frame.height()) {
+    other = "size (" + std::to_string(m.width()) + "x" + std::to_string(m.height()) +
+            ", the frame is " + std::to_string(frame.width()) + "x" +
+            std::to_string(frame.height()) + ")";
+  } else if (m.has_intensity() != frame.info.has_intensity) {
+    other = m.has_intensity() ? "intensity channel (the frame has none)"
+                              : "channel set (no intensity; the frame has one)";
+  } else if (m.truth.has_value() != frame.truth.has_value()) {
+    other = m.truth ? "ground truth (the frame has none)" : "channel set (no ground truth)";
+  } else if (m.delta_l_m.empty() == pipeline.options().accuracy_enabled) {
+    other = m.delta_l_m.empty() ? "channel set (no ΔL; this pipeline computes it)"
+                                : "ΔL channel (this pipeline computes none)";
+  } else if (out.cloud.empty() == pipeline.options().cloud_enabled) {
+    other = out.cloud.empty() ? "channel set (no point cloud; this pipeline makes one)"
+                              : "point cloud (this pipeline makes none)";
+  }
+  if (!other.empty()) {
+    throw Error(ErrorCode::kMismatch,
+                "process: out holds a result with another " + other +
+                    "; its buffers cannot be reused (views of them would point at freed "
+                    "memory): pass out=None or a result of this kind of frame");
+  }
+}
+
 YAML::Node ToYaml(py::handle value, const std::string& path) {
   if (py::isinstance<py::dict>(value)) {
     YAML::Node node(YAML::NodeType::Map);
@@ -52,6 +83,15 @@ YAML::Node ToYaml(py::handle value, const std::string& path) {
     return node;
   }
   if (py::isinstance<Flag>(value)) return YAML::Node(std::string(FlagName(value.cast<Flag>())));
+  // NumPy scalars (np.float32(5.5), np.int64(3), np.bool_): their Python value. Other NumPy
+  // objects (arrays) stay unsupported.
+  if (py::isinstance(value, py::module_::import("numpy").attr("generic"))) {
+    py::object item = value.attr("item")();
+    if (py::isinstance<py::bool_>(item) || py::isinstance<py::int_>(item) ||
+        py::isinstance<py::float_>(item)) {
+      return ToYaml(item, path);
+    }
+  }
   throw py::type_error("option '" + path + "' has unsupported type " +
                        std::string(py::str(py::type::of(value).attr("__name__"))));
 }
@@ -153,11 +193,13 @@ void BindOptions(py::module_& m) {
           "to_yaml",
           [](const PyPipelineOptions& o) { return PipelineConfigToYaml(o.options, &o.given_keys); },
           "The options as configuration text with a comment per key.")
-      .def("__eq__",
-           [](const PyPipelineOptions& a, const PyPipelineOptions& b) {
-             return PipelineConfigToYaml(a.options, &a.given_keys) ==
-                    PipelineConfigToYaml(b.options, &b.given_keys);
-           })
+      .def(
+          "__eq__",
+          [](const PyPipelineOptions& a, const PyPipelineOptions& b) {
+            return PipelineConfigToYaml(a.options, &a.given_keys) ==
+                   PipelineConfigToYaml(b.options, &b.given_keys);
+          },
+          py::is_operator())  // another type: NotImplemented, so `options == None` is False
       .def("__repr__", [](const PyPipelineOptions& o) {
         return "PipelineOptions.from_dict(" + std::string(py::repr(OptionsToDict(o))) + ")";
       });
@@ -362,7 +404,11 @@ void BindPipelineClass(py::module_& m) {
       .def(
           "process",
           [](Pipeline& p, const Frame& frame, std::shared_ptr<PipelineResult> out) {
-            if (!out) out = std::make_shared<PipelineResult>();
+            if (!out) {
+              out = std::make_shared<PipelineResult>();
+            } else {
+              CheckReusable(p, frame, *out);
+            }
             {
               py::gil_scoped_release release;
               p.Process(frame, *out);
@@ -371,7 +417,9 @@ void BindPipelineClass(py::module_& m) {
           },
           py::arg("frame"), py::arg("out") = nullptr,
           "Runs every stage on a Frame (GIL released). With `out`, its buffers are reused "
-          "(views of it then show the new frame); otherwise a new PipelineResult is returned.")
+          "(views of it then show the new frame); MismatchError when `out` holds a frame of "
+          "another size or other channels (intensity, ground truth, ΔL, cloud). Otherwise a new "
+          "PipelineResult is returned.")
       .def_property_readonly("initial_integration_register", &Pipeline::InitialIntegrationRegister,
                              "Register to set before the first frame (c_0).")
       .def("reset_controller", &Pipeline::ResetController, py::arg("register"),
@@ -379,11 +427,14 @@ void BindPipelineClass(py::module_& m) {
       .def(
           "render_raw",
           [](const Pipeline& p, const PipelineResult& r) { return Own(p.RenderRaw(r)); },
-          py::arg("result"), "uint8 (H, W', 3) false colour with only the input flags black.")
+          py::arg("result"),
+          "uint8 (H', W, 3) false colour with only the input flags black; with the options' "
+          "color_legend (default) a legend bar is appended below, so H' > H.")
       .def(
           "render_filtered",
           [](const Pipeline& p, const PipelineResult& r) { return Own(p.RenderFiltered(r)); },
-          py::arg("result"), "uint8 (H, W', 3) false colour after the filters.")
+          py::arg("result"),
+          "uint8 (H', W, 3) false colour after the filters (legend as in render_raw).")
       .def_property_readonly(
           "options",
           [](const Pipeline& p) {
@@ -392,7 +443,8 @@ void BindPipelineClass(py::module_& m) {
             return o;
           },
           "The effective options (after calibration and camera bounds).")
-      .def_property_readonly("camera", &Pipeline::camera)
+      .def_property_readonly("camera", &Pipeline::camera, py::return_value_policy::copy,
+                             "CameraInfo the pipeline was made for (a copy).")
       .def_property_readonly("controller_name",
                              [](const Pipeline& p) { return std::string(p.ControllerName()); })
       .def(

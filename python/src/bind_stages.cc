@@ -185,7 +185,11 @@ void BindFunctions(py::module_& m) {
       [](const std::vector<std::shared_ptr<MetricFrame>>& frames) {
         std::vector<MetricFrame> fs;
         fs.reserve(frames.size());
-        for (const auto& f : frames) fs.push_back(*f);
+        for (const auto& f : frames) {
+          if (!f)
+            throw py::type_error("fit_delta_l_scale: frames must be tofcam.MetricFrame objects");
+          fs.push_back(*f);
+        }
         const DeltaLScaleFit fit = FitDeltaLScale(fs);
         py::dict d;
         d["scale"] = fit.scale;

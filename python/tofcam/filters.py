@@ -17,6 +17,13 @@ def _frame(frame, radial_distance_m, amplitude, intensity, delta_l_m, flags):
     if frame is not None:
         if not isinstance(frame, MetricFrame):
             raise TypeError("frame must be a tofcam.MetricFrame (or pass arrays by keyword)")
+        given = [name for name, array in (("radial_distance_m", radial_distance_m),
+                                          ("amplitude", amplitude), ("intensity", intensity),
+                                          ("delta_l_m", delta_l_m), ("flags", flags))
+                 if array is not None]
+        if given:
+            raise TypeError("pass a MetricFrame or arrays, not both (got the frame and " +
+                            ", ".join(given) + ")")
         return frame
     if radial_distance_m is None:
         raise TypeError("pass a MetricFrame or radial_distance_m=...")

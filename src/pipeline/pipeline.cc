@@ -18,6 +18,12 @@ using pipeline_internal::ValidateSection;
 
 namespace {
 
+// src's pixels into dst, in dst's own buffer once it has src's size (every frame after the first).
+void CopyPixels(const Image<float>& src, Image<float>& dst) {
+  if (!dst.SameSize(src)) dst = Image<float>(src.width(), src.height());
+  std::copy(src.data(), src.data() + src.size(), dst.data());
+}
+
 // The accuracy threshold's kHighDeltaL judged again on the frame's current ΔL, in its flags and
 // in the filter flags (a stage after the fused pass changed ΔL). `raised` is scratch, reused.
 void JudgeDeltaLAgain(const AccuracyThresholdOptions& o, MetricFrame& m,
@@ -266,9 +272,11 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   // Denoising: before the pair (which then unwraps the means) and the neighbourhood filters.
   if (options_.denoise_enabled) {
     DenoiseInto(m, rays_, options_.denoise, denoised_);
-    std::swap(m.radial_distance_m, denoised_.radial_distance_m);
-    std::swap(m.delta_l_m, denoised_.delta_l_m);
-    if (!m.amplitude.empty()) std::swap(m.amplitude, denoised_.amplitude);
+    // Copied, not swapped: the result's buffers stay the ones the caller (or a NumPy view of
+    // them) holds, and none of the pipeline's own buffers ends up in the result.
+    CopyPixels(denoised_.radial_distance_m, m.radial_distance_m);
+    CopyPixels(denoised_.delta_l_m, m.delta_l_m);
+    if (!m.amplitude.empty()) CopyPixels(denoised_.amplitude, m.amplitude);
     // A pixel rejected only for its single reading's ΔL is judged on its mean's.
     if (filters.accuracy_enabled)
       JudgeDeltaLAgain(filters.accuracy, m, result.filter_flags, rejudged_);
@@ -290,7 +298,7 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
   }
   if (options_.smoothing_enabled) {
     SpatialFilterInto(m, options_.smoothing, smoothed_);
-    std::swap(m.radial_distance_m, smoothed_);  // no allocation once both buffers exist
+    CopyPixels(smoothed_, m.radial_distance_m);  // in place, as the denoised channels above
   }
   if (temporal_) temporal_->Process(m);
   if (late_cloud && options_.cloud_enabled) {

@@ -162,3 +162,34 @@ def test_finite_cameras_iterate_to_the_end(data_dir):
     frames = list(cam)
     assert len(frames) == 3
     assert [f.info.sequence for f in frames] == sorted(f.info.sequence for f in frames)
+
+
+def test_a_cameras_info_model_and_options_are_copies():
+    cam = tofcam.SimulatedCamera("wall", seed=1)
+    info = cam.info
+    info.intrinsics.width = 4000
+    assert cam.info.intrinsics.width == 160
+    tofcam.Pipeline(cam)  # still built for the camera's real size
+    opts = cam.options
+    opts.supersampling = 100
+    assert cam.options.supersampling != 100
+    model = cam.model
+    model.intrinsics.width = 7
+    assert cam.model.intrinsics.width == 160
+    with pytest.raises(TypeError, match="'seed'.*-1"):
+        tofcam.SimulatedCamera("wall", seed=-1)
+
+
+def test_an_imported_sequence_checks_frames_set_after_construction():
+    cam = tofcam.SimulatedCamera("wall", seed=1)
+    seq = tofcam.ImportedSequence(cam.info, [cam.grab()])
+    with pytest.raises(TypeError, match="frame 0 is None"):
+        seq.frames = [None]
+    other = tofcam.SimulatedCamera("wall", model="sr4000", seed=1)
+    with pytest.raises(tofcam.MismatchError, match="frame 1"):
+        seq.frames = [cam.grab(), other.grab()]
+    with pytest.raises(tofcam.MismatchError):
+        seq.camera = other.info
+    assert len(seq) == 1
+    seq.frames = [cam.grab(), cam.grab()]
+    assert len(tofcam.ImportedCamera(seq)) == 2

@@ -114,3 +114,25 @@ def test_rays_are_unit_vectors_through_the_principal_point():
     np.testing.assert_allclose(np.linalg.norm(rays, axis=2), 1.0, atol=1e-6)
     # The principal point lies between pixels (79.5, 61.5): the four centre rays are symmetric.
     np.testing.assert_allclose(rays[61, 79, :2], -rays[62, 80, :2], atol=1e-6)
+
+
+def test_a_new_channel_takes_the_frames_size_and_none_is_refused():
+    d = np.ones((4, 5), np.float32)
+    f = tofcam.MetricFrame(radial_distance_m=d, amplitude=d)
+    assert f.intensity is None
+    with pytest.raises(ValueError, match=r"\(2, 2\).*\(4, 5\)"):
+        f.intensity = np.ones((2, 2), np.float32)
+    assert f.intensity is None and not f.has_intensity
+    f.intensity = np.full((4, 5), 7, np.float32)
+    assert f.has_intensity and f.intensity[3, 4] == 7
+    with pytest.raises(TypeError, match="cannot be removed"):
+        f.intensity = None
+
+
+def test_arrays_after_pickle_have_an_equal_dtype_and_byte_order_still_counts():
+    import pickle
+    d = pickle.loads(pickle.dumps(np.ones((4, 5), np.float32)))
+    f = tofcam.MetricFrame(radial_distance_m=d, amplitude=d)
+    assert f.width == 5
+    with pytest.raises(TypeError, match="dtype"):
+        tofcam.MetricFrame(radial_distance_m=d.astype(">f4"), amplitude=d)

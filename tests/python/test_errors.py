@@ -33,3 +33,19 @@ def test_real_errors_keep_the_cpp_message():
         pipe = tofcam.Pipeline(info)
         small = tofcam.SimulatedCamera("wall", model=tofcam.CameraModel.builtin("sr4000"))
         pipe.process(small.grab())
+
+
+
+def test_messages_with_bytes_that_are_not_utf8_stay_tofcam_errors(tmp_path):
+    # Messages quote paths and file contents; a strict UTF-8 decoding used to raise
+    # UnicodeDecodeError in place of the tofcam error.
+    import os
+    garbage = tmp_path / "random.bin"
+    garbage.write_bytes(bytes(range(128, 256)) * 4)
+    with pytest.raises(tofcam.Error) as info:
+        tofcam.load_calibration(garbage)
+    assert isinstance(str(info.value), str)
+    missing = tmp_path / os.fsdecode(b"\xff.h5")
+    with pytest.raises(tofcam.NotFoundError) as info:
+        tofcam.RecordingReader(missing)
+    assert ".h5" in str(info.value)

@@ -107,3 +107,24 @@ def test_writers(tmp_path):
     assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(TypeError):
         tofcam.write_png(tmp_path / "g.png", np.zeros((4, 4, 3)))
+
+
+def test_reader_info_counts_from_the_end_and_returns_copies(tmp_path):
+    path = tmp_path / "rec.h5"
+    grabbed = record(path)
+    r = tofcam.RecordingReader(path)
+    assert r.info(-1).sequence == grabbed[-1].info.sequence
+    with pytest.raises(IndexError):
+        r.info(-4)
+    info = r.info(0)
+    info.modulation_frequency_hz = 5.0
+    assert r.info(0).modulation_frequency_hz != 5.0
+    meta = r.metadata
+    meta.camera.model = "changed"
+    assert r.metadata.camera.model == "SR-2"
+
+
+def test_calibrate_option_types_are_named():
+    cam = tofcam.SimulatedCamera("wall", seed=1)
+    with pytest.raises(TypeError, match="warmup_max_frames.*int"):
+        tofcam.calibrate(cam, 2.0, warmup_max_frames="x")

@@ -148,3 +148,45 @@ def test_denoising_before_the_pair_lowers_delta_l_and_is_judged_again():
     assert not np.array_equal(distances[False], distances[True])
     with pytest.raises(tofcam.InvalidArgumentError, match="support_sigma"):
         tofcam.PipelineOptions(denoise={"support_sigma": 0})
+
+
+def test_out_of_another_layout_is_refused_not_freed_under_its_views():
+    # Filling `out` from a frame of another size or with other channels would replace buffers
+    # that views of it still point into (a use-after-free that crashed the interpreter).
+    small = tofcam.SimulatedCamera("wall", seed=1)
+    res = tofcam.Pipeline(small.info).process(small.grab())
+    view = res.frame.radial_distance_m
+    kept = view.copy()
+    big = tofcam.SimulatedCamera("wall", model="sr4000", seed=1)
+    with pytest.raises(tofcam.MismatchError, match="size"):
+        tofcam.Pipeline(big.info).process(big.grab(), out=res)
+    without_accuracy = tofcam.Pipeline(
+        small.info, {"accuracy": {"enabled": False}, "filters": {"accuracy": {"enabled": False}}})
+    with pytest.raises(tofcam.MismatchError, match="ΔL"):
+        without_accuracy.process(small.grab(), out=res)
+    assert np.array_equal(view, kept)  # nothing was written through the refused calls
+    tofcam.Pipeline(small.info).process(small.grab(), out=res)  # same layout: in place
+    assert np.shares_memory(view, res.frame.radial_distance_m)
+
+
+def test_options_take_numpy_scalars_and_compare_with_other_types():
+    o = tofcam.PipelineOptions(filters={"range": {"enabled": np.bool_(True),
+                                                  "max_distance_m": np.float32(5.5)}},
+                               controller={"bias_register": np.int64(40)})
+    d = o.to_dict()
+    assert d["filters"]["range"]["max_distance_m"] == 5.5
+    assert d["filters"]["range"]["enabled"] is True
+    assert d["controller"]["bias_register"] == 40
+    assert (o == None) is False  # noqa: E711 (the operator itself is under test)
+    assert o != "options"
+    with pytest.raises(TypeError, match="max_distance_m"):
+        tofcam.PipelineOptions(filters={"range": {"max_distance_m": np.zeros(2)}})
+
+
+def test_render_shape_is_the_image_and_the_legend_below():
+    cam = tofcam.SimulatedCamera("wall", seed=1)
+    pipe = tofcam.Pipeline(cam.info)
+    res = pipe.process(cam.grab())
+    for rgb in (pipe.render_raw(res), pipe.render_filtered(res)):
+        assert rgb.dtype == np.uint8
+        assert rgb.shape[1:] == (160, 3) and rgb.shape[0] > 124  # the legend adds rows

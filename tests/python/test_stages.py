@@ -140,3 +140,11 @@ def test_noise_fit_recovers_a_known_scale():
         f.delta_l_m = tofcam.delta_l(f)
     fit = tofcam.fit_delta_l_scale(frames)
     assert fit["scale"] == pytest.approx(0.3, rel=0.05)  # 2000 px x 16 frames: ~1 % spread
+
+
+def test_none_among_frames_and_a_frame_with_arrays_are_type_errors():
+    with pytest.raises(TypeError, match="MetricFrame"):
+        tofcam.fit_delta_l_scale([None])
+    f = small_metric_frame(np.full((4, 5), 2.0), np.full((4, 5), 100.0), np.full((4, 5), 300.0))
+    with pytest.raises(TypeError, match="not both.*radial_distance_m"):
+        tofcam.filters.range(f, radial_distance_m=np.zeros((2, 2), np.float32))

@@ -177,6 +177,12 @@ class Pipeline {
   /// `alternate_modulation_frequency_hz` the alternate calibration's for a frame at another
   /// frequency); an uncalibrated pipeline converts every frame with the frame's own frequency.
   /// Throws Error(kInvalidArgument) for an inconsistent frame.
+  ///
+  /// Once `result` holds a frame of this pipeline with the same size and the same channels
+  /// (intensity, ground truth), Process writes into its buffers in place: no buffer is replaced,
+  /// so pointers into them stay valid and show the new frame. A buffer is replaced (the old one
+  /// freed) when the size changes, when a channel comes or goes, or when `result` last came from
+  /// a pipeline that keeps other channels (ΔL, the cloud).
   void Process(const Frame& frame, PipelineResult& result);
   /// Same, into a fresh result.
   [[nodiscard]] PipelineResult Process(const Frame& frame);
