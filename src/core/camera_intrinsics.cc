@@ -1,8 +1,13 @@
 #include "tofcam/core/camera_intrinsics.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
+#include <string>
+#include <vector>
 
 #include "tofcam/core/error.h"
 
@@ -20,7 +25,77 @@ double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b));
 }
 
+// A lens model whose distortion folds over inside the image maps two directions to one pixel
+// and leaves some pixels without a ray on the first branch (Undistort then fails or lands on
+// the fold's far side): the corners alone cannot show it. Along rays from the optical axis in
+// 32 directions (and through the four corners), the distortion must stay one to one (positive
+// Jacobian, growing distorted radius) out to the largest distorted radius any pixel has.
+void CheckDistortionUnfolds(const CameraIntrinsics& k) {
+  // The last lens that passed, per thread: a ROS 2 source validates every CameraInfo it takes.
+  thread_local std::optional<std::array<double, 14>> passed;
+  const std::array<double, 14> lens = {static_cast<double>(k.width),
+                                       static_cast<double>(k.height),
+                                       k.fx_px,
+                                       k.fy_px,
+                                       k.cx_px,
+                                       k.cy_px,
+                                       k.k1,
+                                       k.k2,
+                                       k.k3,
+                                       k.k4,
+                                       k.k5,
+                                       k.k6,
+                                       k.p1,
+                                       k.p2};
+  if (passed == lens) return;
+  double rho_max = 0.0;  // distorted normalised radius of the farthest image corner
+  std::vector<double> angles;
+  for (double u : {-0.5, k.width - 0.5}) {
+    for (double v : {-0.5, k.height - 0.5}) {
+      const double x = (u - k.cx_px) / k.fx_px, y = (v - k.cy_px) / k.fy_px;
+      rho_max = std::max(rho_max, std::hypot(x, y));
+      angles.push_back(std::atan2(y, x));
+    }
+  }
+  constexpr int kDirections = 32;
+  for (int i = 0; i < kDirections; ++i) angles.push_back(2.0 * M_PI * i / kDirections);
+  // Steps of 1/64 of the radius reached so far (at least of rho_max / 64): fine near the axis,
+  // and a strongly compressing lens still arrives in a few hundred steps. r = 1e3 is 89.94
+  // degrees off the axis.
+  constexpr double kMaxRadius = 1e3;
+  constexpr double kH = 1e-7;
+  for (double a : angles) {
+    const Eigen::Vector2d dir(std::cos(a), std::sin(a));
+    double r = 0.0, last_rho = 0.0;
+    while (last_rho < rho_max) {
+      r += std::max(rho_max, r) / 64.0;
+      const Eigen::Vector2d n = r * dir;
+      const double rho = k.Distort(n).norm();
+      Eigen::Matrix2d j;
+      j.col(0) = (k.Distort(n + Eigen::Vector2d(kH, 0)) - k.Distort(n - Eigen::Vector2d(kH, 0))) /
+                 (2 * kH);
+      j.col(1) = (k.Distort(n + Eigen::Vector2d(0, kH)) - k.Distort(n - Eigen::Vector2d(0, kH))) /
+                 (2 * kH);
+      if (!(rho > last_rho) || !(j.determinant() > 0.0) || r > kMaxRadius) {
+        throw Error(ErrorCode::kInvalidArgument,
+                    "intrinsics: the lens distortion (k1..k6, p1, p2) folds over inside the "
+                    "image (" +
+                        std::to_string(static_cast<int>(std::round(std::atan(r) * 180.0 / M_PI))) +
+                        " degrees off the axis): some pixels would have no ray");
+      }
+      last_rho = rho;
+    }
+  }
+  passed = lens;
+}
+
 }  // namespace
+
+void NoRay(double u, double v) {
+  throw Error(ErrorCode::kInvalidArgument,
+              "intrinsics: the distortion cannot be inverted at pixel (" + std::to_string(u) +
+                  ", " + std::to_string(v) + "): it has no ray");
+}
 
 CameraIntrinsics CameraIntrinsics::SwissRangerSr2() {
   CameraIntrinsics k;
@@ -66,6 +141,7 @@ void CameraIntrinsics::Validate() const {
       }
     }
   }
+  if (HasDistortion()) CheckDistortionUnfolds(*this);
 }
 
 bool CameraIntrinsics::HasDistortion() const noexcept {
@@ -130,6 +206,7 @@ RayTable MakeRayTable(const CameraIntrinsics& k) {
   for (int r = 0; r < k.height; ++r) {
     for (int c = 0; c < k.width; ++c) {
       const Eigen::Vector3d ray = k.Unproject({static_cast<double>(c), static_cast<double>(r)});
+      if (!ray.allFinite()) NoRay(c, r);
       t.x(r, c) = static_cast<float>(ray.x());
       t.y(r, c) = static_cast<float>(ray.y());
       t.z(r, c) = static_cast<float>(ray.z());

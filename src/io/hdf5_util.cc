@@ -521,7 +521,7 @@ bool ReadDoubleArrayAttribute(const std::filesystem::path& file, hid_t obj, cons
 
 bool ReadStringAttribute(const std::filesystem::path& file, hid_t obj, const std::string& name,
                          std::string& out) {
-  constexpr std::size_t kMaxBytes = 1 << 16;
+  constexpr std::size_t kMaxBytes = kMaxStringAttributeBytes;
   Handle attr = OpenAttribute(obj, name);
   if (!attr.valid()) return false;
   if (AttributeElements(file, attr.get(), name) != 1) {
@@ -581,6 +581,12 @@ void WriteDoubleArrayAttribute(const std::filesystem::path& file, hid_t obj,
 
 void WriteStringAttribute(const std::filesystem::path& file, hid_t obj, const std::string& name,
                           const std::string& value) {
+  if (value.size() + 1 > kMaxStringAttributeBytes) {
+    // The reader would refuse the file (ReadStringAttribute): refuse to write it.
+    Fail(ErrorCode::kInvalidArgument, file,
+         "attribute '" + name + "' is " + std::to_string(value.size()) + " bytes, more than the " +
+             std::to_string(kMaxStringAttributeBytes - 1) + " a recording may hold");
+  }
   if (H5Aexists(obj, name.c_str()) > 0) H5Adelete(obj, name.c_str());
   Handle type(H5Tcopy(H5T_C_S1), H5Tclose);
   H5Tset_size(type.get(), value.size() + 1);

@@ -5,6 +5,7 @@
 
 #include <hdf5.h>
 
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -106,6 +107,10 @@ template <typename T>
 void ReadSlab(const std::filesystem::path& file, hid_t dataset, const std::string& name,
               hid_t mem_type, const std::vector<hsize_t>& start, const std::vector<hsize_t>& count,
               std::vector<T>& out);
+
+/// Longest string attribute (bytes, with its terminating NUL) the reader accepts and the writer
+/// writes: a hostile file cannot make the reader allocate more.
+inline constexpr std::size_t kMaxStringAttributeBytes = 1 << 16;
 
 /// Reads a scalar attribute of `obj` (converted to `mem_type`); false when it does not exist,
 /// kFormat when it exists but is not a scalar or one-element attribute of a convertible type.

@@ -226,6 +226,21 @@ RecordingWriter::RecordingWriter(const std::filesystem::path& path, const Camera
     : impl_(std::make_unique<Impl>()) {
   options.Validate();
   camera.intrinsics.Validate();
+  // What the reader would refuse is not written: the same size limits (hostile-size guards).
+  const int cam_w = camera.width(), cam_h = camera.height();
+  if (static_cast<hsize_t>(cam_w) > kMaxSide || static_cast<hsize_t>(cam_h) > kMaxSide ||
+      static_cast<long long>(cam_w) * cam_h > kMaxFramePixels) {
+    throw Error(ErrorCode::kInvalidArgument,
+                path.string() + ": a recording holds frames of at most " +
+                    std::to_string(kMaxFramePixels) + " pixels and " + std::to_string(kMaxSide) +
+                    " per side; the camera's are " + std::to_string(cam_w) + " x " +
+                    std::to_string(cam_h));
+  }
+  if (camera.model.size() + 1 > io_internal::kMaxStringAttributeBytes) {
+    throw Error(ErrorCode::kInvalidArgument, path.string() + ": the camera model's name is " +
+                                                 std::to_string(camera.model.size()) +
+                                                 " bytes, more than a recording holds");
+  }
   if (!(camera.modulation_frequency_hz > 0) || !std::isfinite(camera.modulation_frequency_hz)) {
     throw Error(ErrorCode::kInvalidArgument,
                 path.string() + ": camera modulation frequency must be > 0 and finite");

@@ -22,6 +22,14 @@ void Require(bool ok, const std::string& what) {
 void CameraModel::Validate() const {
   intrinsics.Validate();
   Require(!name.empty(), "name must not be empty");
+  Require(name.size() <= kMaxNameBytes, "name is " + std::to_string(name.size()) +
+                                            " bytes, at most " + std::to_string(kMaxNameBytes));
+  // The simulator keeps several float images and a ray table of supersampled rays per pixel; a
+  // ToF sensor has at most about 1 Mpixel, and a recording holds frames of up to 2^22 pixels.
+  Require(static_cast<long long>(intrinsics.width) * intrinsics.height <= kMaxPixels,
+          "intrinsics " + std::to_string(intrinsics.width) + " x " +
+              std::to_string(intrinsics.height) + " exceed " + std::to_string(kMaxPixels) +
+              " pixels (2048 x 2048)");
   Require(!modulation_frequencies_hz.empty(), "modulation_frequencies_hz must not be empty");
   for (double f : modulation_frequencies_hz) {
     Require(std::isfinite(f) && f > 0, "modulation frequencies must be > 0 Hz");

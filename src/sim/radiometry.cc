@@ -251,7 +251,9 @@ void BuildPixelRays(const CameraModel& model, int ss, PixelRays& rays, Subsample
   for (int r = 0; r < height; ++r) {
     for (int c = 0; c < width; ++c) {
       const std::size_t p = static_cast<std::size_t>(r) * width + c;
-      const Eigen::Vector3f cd = model.intrinsics.Unproject({c, r}).cast<float>();
+      const Eigen::Vector3d center = model.intrinsics.Unproject({c, r});
+      if (!center.allFinite()) NoRay(c, r);  // Embree must never see a NaN ray
+      const Eigen::Vector3f cd = center.cast<float>();
       rays.center_x[p] = cd.x();
       rays.center_y[p] = cd.y();
       rays.center_z[p] = cd.z();
@@ -259,6 +261,7 @@ void BuildPixelRays(const CameraModel& model, int ss, PixelRays& rays, Subsample
         for (int j = 0; j < ss; ++j) {
           const Eigen::Vector2d px(c + (j + 0.5) / ss - 0.5, r + (i + 0.5) / ss - 0.5);
           const Eigen::Vector3d d = model.intrinsics.Unproject(px);
+          if (!d.allFinite()) NoRay(px.x(), px.y());
           const double cos_a = d.z();
           const double c4 = cos_a * cos_a * cos_a * cos_a;
           const std::size_t s =
@@ -394,9 +397,8 @@ void Bounce(const MirrorContext& mc, const RayBatch& b, std::size_t i, std::size
       const Eigen::Vector3f hit = o + t * dir;
       radiance = m.diffuse * (ambient + LampIrradiance(scene, hit, n, obj, lamp_on));
       const int bulb = obj - scene.lamp_bulb_begin;
-      if (bulb >= 0 && bulb < static_cast<int>(lamp_on.size()) && lamp_on[bulb]) {
-        radiance += m.emission;
-      }
+      const bool is_bulb = bulb >= 0 && bulb < static_cast<int>(lamp_on.size());
+      if (!is_bulb || lamp_on[bulb]) radiance += m.emission;  // as in RenderAt
     }
     dc += active + mc.sub_bg[si] * att * radiance;
   }

@@ -10,7 +10,9 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #include "tofcam/core/atomic_file.h"
@@ -20,6 +22,11 @@
 
 namespace tofcam::sim {
 namespace {
+
+// Object sizes (plane and box sides, radii, heights), m: smaller vanishes between the rays,
+// larger leaves float precision at the scene's scale.
+constexpr double kMinSizeM = 1e-6;
+constexpr double kMaxSizeM = 1e4;
 
 using internal::YamlReader;
 
@@ -512,7 +519,7 @@ Scene ParseScene(std::string_view yaml_text, const std::string& source,
     if (const YAML::Node p = root["parameters"]) {
       if (!p.IsMap()) r0.Fail(p, "parameters must be a mapping of name: number");
       for (const auto& kv : p) {
-        const std::string key = kv.first.as<std::string>();
+        const std::string key = r0.Key(kv.first, "parameters");
         scene.parameters[key] = r0.Number(kv.second, "parameter " + key);
       }
     }
@@ -548,7 +555,7 @@ Scene ParseScene(std::string_view yaml_text, const std::string& source,
       r.CheckKeys(kv.second, {"albedo", "specular", "shininess", "mirror", "emission_w_m2_sr"},
                   "material");
       Material m;
-      m.name = kv.first.as<std::string>();
+      m.name = r.Key(kv.first, "materials");
       r.Read(kv.second, "albedo", m.albedo, 0, 1);
       r.Read(kv.second, "specular", m.specular, 0, 1);
       r.Read(kv.second, "shininess", m.shininess, 1e-3, 1e5);
@@ -560,6 +567,18 @@ Scene ParseScene(std::string_view yaml_text, const std::string& source,
   }
   const YAML::Node objs = root["objects"];
   if (!objs || !objs.IsSequence()) r.FailAt(0, "scene needs an 'objects' list");
+  // A small file can name an object or a mesh many times (YAML aliases): bounded, so that it
+  // fails here instead of in the allocator. A mesh file named twice is read once.
+  constexpr std::size_t kMaxObjects = 1 << 16;
+  constexpr std::size_t kMaxTriangles = 1 << 23;
+  if (objs.size() > kMaxObjects) {
+    r.Fail(objs, "scene has " + std::to_string(objs.size()) + " objects, at most " +
+                     std::to_string(kMaxObjects));
+  }
+  std::size_t triangles = 0;
+  std::map<std::filesystem::path,
+           std::pair<std::vector<Eigen::Vector3f>, std::vector<Eigen::Vector3i>>>
+      meshes;
   for (const auto& o : objs) {
     r.CheckKeys(o,
                 {"name", "type", "material", "size_m", "radius_m", "height_m", "file", "scale",
@@ -580,32 +599,57 @@ Scene ParseScene(std::string_view yaml_text, const std::string& source,
     };
     if (type == "plane") {
       const Eigen::Vector2d s = r.Vec2(need("size_m"), "size_m");
-      if ((s.array() <= 0).any()) r.Fail(o["size_m"], "size_m must be > 0");
+      // The range of radius_m: smaller vanishes between rays, larger leaves float precision.
+      if (!(s.array() >= kMinSizeM).all() || !(s.array() <= kMaxSizeM).all()) {
+        r.Fail(o["size_m"], "size_m must be in [1e-06, 10000] m");
+      }
       MakePlane(s, obj.vertices, obj.triangles);
     } else if (type == "box") {
       const Eigen::Vector3d s = r.Vec3(need("size_m"), "size_m");
-      if ((s.array() <= 0).any()) r.Fail(o["size_m"], "size_m must be > 0");
+      if (!(s.array() >= kMinSizeM).all() || !(s.array() <= kMaxSizeM).all()) {
+        r.Fail(o["size_m"], "size_m must be in [1e-06, 10000] m");
+      }
       MakeBox(s, obj.vertices, obj.triangles);
     } else if (type == "sphere") {
-      MakeSphere(r.Number(need("radius_m"), "radius_m", 1e-6, 1e4), obj.vertices, obj.triangles);
+      MakeSphere(r.Number(need("radius_m"), "radius_m", kMinSizeM, kMaxSizeM), obj.vertices,
+                 obj.triangles);
     } else if (type == "cylinder") {
-      MakeCylinder(r.Number(need("radius_m"), "radius_m", 1e-6, 1e4),
-                   r.Number(need("height_m"), "height_m", 1e-6, 1e4), obj.vertices, obj.triangles);
+      MakeCylinder(r.Number(need("radius_m"), "radius_m", kMinSizeM, kMaxSizeM),
+                   r.Number(need("height_m"), "height_m", kMinSizeM, kMaxSizeM), obj.vertices,
+                   obj.triangles);
     } else if (type == "mesh") {
       std::filesystem::path file = r.String(need("file"), "file");
       if (file.is_relative()) file = base_dir / file;
-      try {
-        LoadMesh(file, obj.vertices, obj.triangles);
-      } catch (const Error& e) {
-        r.Fail(o["file"], e.what());
+      auto cached = meshes.find(file);
+      if (cached == meshes.end()) {
+        try {
+          LoadMesh(file, obj.vertices, obj.triangles);
+        } catch (const Error& e) {
+          r.Fail(o["file"], e.what());
+        }
+        cached = meshes.emplace(file, std::make_pair(obj.vertices, obj.triangles)).first;
+      } else {
+        obj.vertices = cached->second.first;
+        obj.triangles = cached->second.second;
       }
       if (obj.triangles.empty()) r.Fail(o["file"], "mesh has no triangles");
       const double scale = o["scale"] ? r.Number(o["scale"], "scale", 1e-9, 1e9) : 1.0;
-      for (auto& v : obj.vertices) v *= static_cast<float>(scale);
+      for (auto& v : obj.vertices) {
+        v *= static_cast<float>(scale);
+        if (!(v.array().abs() <= static_cast<float>(kMaxSizeM)).all()) {
+          r.Fail(o["file"], "mesh vertex beyond 10000 m after scale " + std::to_string(scale) +
+                                " (or not finite)");
+        }
+      }
     } else {
       r.Fail(o["type"], "unknown object type '" + type + "' (plane, box, sphere, cylinder, mesh)");
     }
     obj.motion = ReadPose(r, o);
+    triangles += obj.triangles.size();
+    if (triangles > kMaxTriangles) {
+      r.Fail(o, "scene has more than " + std::to_string(kMaxTriangles) + " triangles (at object '" +
+                    obj.name + "')");
+    }
     scene.objects.push_back(std::move(obj));
   }
   if (const YAML::Node c = root["camera"]) {

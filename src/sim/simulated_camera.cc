@@ -173,10 +173,10 @@ struct SimulatedCamera::Impl {
       const float ambient = static_cast<float>(scene.ambient_irradiance_w_m2);
       for (std::size_t g = 0; g < object_radiance.size(); ++g) {
         object_radiance[g] = shade[g].diffuse * ambient;
+        // A lamp's bulb glows while its lamp is on; any other glowing material always.
         const int bulb = static_cast<int>(g) - scene.lamp_bulb_begin;
-        if (bulb >= 0 && bulb < static_cast<int>(lamp_on.size()) && lamp_on[bulb]) {
-          object_radiance[g] += shade[g].emission;
-        }
+        const bool is_bulb = bulb >= 0 && bulb < static_cast<int>(lamp_on.size());
+        if (!is_bulb || lamp_on[bulb]) object_radiance[g] += shade[g].emission;
       }
     }
     const float inv_range = static_cast<float>(1.0 / range_m);

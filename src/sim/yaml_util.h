@@ -29,12 +29,18 @@ class YamlReader {
     throw Error(ErrorCode::kFormat, source_ + ":" + std::to_string(line0 + 1) + ": " + problem);
   }
 
+  /// A mapping's key as text; kFormat for a key that is a sequence or a mapping ("? [a, b]").
+  std::string Key(const YAML::Node& key, const std::string& what) const {
+    if (!key.IsScalar()) Fail(key, "keys of " + what + " must be plain names");
+    return key.Scalar();
+  }
+
   /// Rejects keys not in `allowed` (typos must not silently fall back to defaults).
   void CheckKeys(const YAML::Node& map, const std::set<std::string>& allowed,
                  const std::string& what) const {
     if (!map.IsMap()) Fail(map, what + " must be a mapping");
     for (const auto& kv : map) {
-      const std::string key = kv.first.as<std::string>();
+      const std::string key = Key(kv.first, what);
       if (!allowed.count(key)) Fail(kv.first, "unknown key '" + key + "' in " + what);
     }
   }

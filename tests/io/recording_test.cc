@@ -368,6 +368,28 @@ ErrorCode CodeOfOpening(const fs::path& file) {
   return ErrorCode::kInternal;  // no error at all
 }
 
+// What the reader refuses as hostile (frames over 2^22 pixels, a name over 64 KiB) is not
+// written: the simulator used to write such files, which tofcam then could not read.
+TEST_F(RecordingTest, WriterRefusesWhatTheReaderWouldRefuse) {
+  CameraInfo big = SmallCamera();
+  big.intrinsics.width = 4096;
+  big.intrinsics.height = 1025;
+  big.intrinsics.cx_px = 2047.5;
+  big.intrinsics.cy_px = 512.0;
+  try {
+    RecordingWriter writer(dir_ / "big.h5", big);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("4096 x 1025"), std::string::npos) << e.what();
+  }
+  CameraInfo named = SmallCamera();
+  named.model = std::string(70000, 'x');
+  EXPECT_THROW(RecordingWriter(dir_ / "named.h5", named), Error);
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "big.h5"));
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "named.h5"));
+}
+
 TEST_F(RecordingTest, MissingAndNonHdf5FilesAreErrors) {
   EXPECT_EQ(CodeOfOpening(dir_ / "missing.h5"), ErrorCode::kNotFound);
   std::ofstream(dir_ / "text.h5") << "not hdf5 at all";

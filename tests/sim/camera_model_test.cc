@@ -72,6 +72,22 @@ TEST(CameraModelTest, ErrorsNameSourceLineAndField) {
     EXPECT_EQ(e.code(), ErrorCode::kFormat);
     EXPECT_NE(std::string(e.what()).find("m.yaml"), std::string::npos) << e.what();
   }
+  // A name the recording could not store, and a sensor larger than a recording holds (the
+  // simulator used to write such files, which the reader then refused).
+  EXPECT_THROW((void)ParseCameraModel("name: " + std::string(300, 'x') + "\n", "m.yaml"), Error);
+  EXPECT_THROW((void)ParseCameraModel("intrinsics: {width: 4096, height: 1025, fx_px: 3000, "
+                                      "fy_px: 3000}\n",
+                                      "m.yaml"),
+               Error);
+  EXPECT_NO_THROW((void)ParseCameraModel(
+      "intrinsics: {width: 2048, height: 2048, fx_px: 1500, fy_px: 1500}\n", "m.yaml"));
+  try {
+    (void)ParseCameraModel("? [a, b]\n: 1\n", "m.yaml");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kFormat);  // not an internal yaml-cpp error
+    EXPECT_NE(std::string(e.what()).find("m.yaml"), std::string::npos) << e.what();
+  }
   EXPECT_THROW((void)ParseCameraModel("tap_duty: abc\n", "m.yaml"), Error);
   EXPECT_THROW((void)ParseCameraModel("default_integration_register: 300\n", "m.yaml"), Error);
   EXPECT_THROW(

@@ -116,6 +116,11 @@ TEST(SceneTest, ErrorsNameFileLineAndProblem) {
       {"  - {type: mesh, material: white, file: missing.ply}\n", ":5:", "missing.ply"},
       {"  - {type: plane, material: white, size_m: [1, 1], size_m: [2, 2]}\n",
        ":5:", "'size_m' appears twice"},
+      // A plane of 1e19 m vanished (every truth distance inf); one of 1e-30 m too.
+      {"  - {type: plane, material: white, size_m: [1e19, 1e19]}\n", ":5:", "size_m"},
+      {"  - {type: box, material: white, size_m: [1e-30, 1, 1]}\n", ":5:", "size_m"},
+      // A key that is a sequence was an internal yaml-cpp error without the file.
+      {"  - {type: plane, material: white, size_m: [1, 1], ? [a, b] : 1}\n", ":5:", "plain names"},
   };
   for (const auto& c : cases) {
     const auto path = TempFile("bad.yaml", base + c.body);
@@ -130,6 +135,23 @@ TEST(SceneTest, ErrorsNameFileLineAndProblem) {
   EXPECT_NE(
       ErrorOf([] { (void)LoadScene("/nonexistent/scene.yaml"); }).find("/nonexistent/scene.yaml"),
       std::string::npos);
+}
+
+// YAML aliases let a small file repeat an object: 9000 spheres of 16 x 32 cells (about a
+// thousand triangles each) exceed the 2^23 triangles a scene may hold, and the load says so
+// instead of allocating gigabytes for Embree.
+TEST(SceneTest, AliasedObjectsAreBounded) {
+  std::string yaml =
+      "name: t\nmaterials: {white: {albedo: 0.5}}\nobjects:\n"
+      "  - &s {type: sphere, material: white, radius_m: 0.1, position_m: [0, 0, 2]}\n";
+  for (int i = 0; i < 9000; ++i) yaml += "  - *s\n";
+  const std::string msg = ErrorOf([&] { (void)ParseScene(yaml, "aliases.yaml", {}); });
+  EXPECT_NE(msg.find("triangles"), std::string::npos) << msg;
+  std::string few =
+      "name: t\nmaterials: {white: {albedo: 0.5}}\nobjects:\n"
+      "  - &s {type: sphere, material: white, radius_m: 0.1, position_m: [0, 0, 2]}\n";
+  for (int i = 0; i < 10; ++i) few += "  - *s\n";
+  EXPECT_EQ(ParseScene(few, "few.yaml", {}).objects.size(), 11u);
 }
 
 TEST(SceneTest, LoadsPlyAndObjMeshes) {

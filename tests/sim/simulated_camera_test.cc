@@ -255,6 +255,31 @@ TEST(SimulatedCameraTest, LampRaisesIntensityNotAmplitude) {
   EXPECT_NEAR(a_on / a_off, 1.0, 1e-3);
 }
 
+// A glowing material (emission_w_m2_sr) that is not a lamp's bulb is unmodulated light like
+// ambient: it raises the offset (intensity) and leaves the modulated amplitude alone. It used to
+// be dropped for every object but the bulbs.
+TEST(SimulatedCameraTest, AGlowingMaterialRaisesIntensityNotAmplitude) {
+  const auto grab = [](double emission) {
+    SimulatorOptions o = Only([](SimulatorOptions& x) { x.background_light = true; });
+    o.integration_time_register = 20;
+    const Scene s = InlineScene(
+        "materials: {w: {albedo: 0.5, emission_w_m2_sr: " + std::to_string(emission) +
+        "}}\nobjects:\n  - {type: plane, material: w, size_m: [10, 10], position_m: [0, 0, 2]}\n");
+    SimulatedCamera cam(s, ResolveCameraModel("sr2"), o);
+    return *cam.Grab();
+  };
+  const Frame plain = grab(0.0), glowing = grab(5.0);
+  double i0 = 0, i1 = 0, a0 = 0, a1 = 0;
+  for (std::size_t p = 0; p < plain.distance.size(); ++p) {
+    i0 += plain.intensity[p];
+    i1 += glowing.intensity[p];
+    a0 += plain.amplitude[p];
+    a1 += glowing.amplitude[p];
+  }
+  EXPECT_GT(i1, 1.1 * i0);
+  EXPECT_NEAR(a1 / a0, 1.0, 1e-3);
+}
+
 // Blooming: over-full-well charge of the saturated hand reaches the neighbouring wall pixels as
 // charge, not light, so it is shared equally by their four taps. Expected: their intensity rises,
 // their amplitude and phase stay those of the wall (noise off, so the comparison is exact up to

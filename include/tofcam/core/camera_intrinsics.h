@@ -50,6 +50,10 @@ struct CameraIntrinsics {
   [[nodiscard]] double VerticalFovRad() const noexcept;
 };
 
+/// Throws Error(kInvalidArgument) saying that pixel coordinates (u, v) have no ray (a lens
+/// model Validate() let through but Unproject() cannot invert there).
+[[noreturn]] void NoRay(double u, double v);
+
 /// Unit rays of every pixel centre, structure-of-arrays for vectorised point-cloud conversion.
 /// Point (m) = radial distance (m) * (x, y, z)(row, col).
 struct RayTable {

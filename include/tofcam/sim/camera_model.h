@@ -4,6 +4,7 @@
 /// one ToF camera type, loaded from YAML (scenes/cameras/*.yaml, embedded in the library at build
 /// time). See docs/simulator.md for every field, its default and why it was chosen.
 
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -23,7 +24,12 @@ struct ScatterLobe {
 
 /// A ToF camera type. All lengths in metres unless named otherwise.
 struct CameraModel {
-  std::string name = "SR-2";  ///< Model name reported in CameraInfo::model.
+  /// Longest name, bytes.
+  static constexpr std::size_t kMaxNameBytes = 256;
+  /// Most pixels a simulated camera may have (2048 x 2048, what a recording holds).
+  static constexpr long long kMaxPixels = 1LL << 22;
+
+  std::string name = "SR-2";  ///< Model name reported in CameraInfo::model (1-256 bytes).
   CameraIntrinsics intrinsics = CameraIntrinsics::SwissRangerSr2();
   /// Selectable modulation frequencies, Hz; the first is the default.
   std::vector<double> modulation_frequencies_hz = {20e6};
