@@ -260,6 +260,25 @@ void RunCalibrate(const CalibrateOptions& o) {
   }
   std::optional<SetpointSource> setpoint_source;
   if (o.setpoint) setpoint_source = OpenSetpointSource(o);
+  // The sources the later phases open are opened once now: a wrong spec must fail before the
+  // minutes of the wall calibration, not after them with nothing written.
+  if (scattering) {
+    try {
+      (void)OpenCamera(o.scattering_target, o.source);
+    } catch (const Error& e) {
+      throw Error(e.code(), std::string("--scattering-target: ") + e.what());
+    }
+  }
+  if (o.wall && o.sweep) {
+    try {
+      (void)OpenCamera(WithWallDistance(o.camera, o.sweep_from_m), o.source);
+    } catch (const Error& e) {
+      throw Error(e.code(),
+                  std::string("--sweep moves the wall, so --camera must be a simulated scene "
+                              "with a distance_m parameter (e.g. sim:wall): ") +
+                      e.what());
+    }
+  }
   if (!o.wall) {
     // Measurements only: added to the calibration in --out, or to a new one with zero offsets.
     std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
@@ -271,7 +290,7 @@ void RunCalibrate(const CalibrateOptions& o) {
     } else {
       calibration = MeasurementsOnly(camera->Info());
       std::printf(
-          "%s does not exist: writing zero offsets (eq. 1 = identity) with the "
+          "%s does not exist: it will hold zero offsets (eq. 1 = identity) and the "
           "measurements below\n",
           o.out.c_str());
     }
@@ -301,6 +320,13 @@ void RunCalibrate(const CalibrateOptions& o) {
     }
   }
 
+  // The option is in mm/s, the procedure's check speaks of m/s: checked here in the option's
+  // unit so that the message names what the user typed.
+  if (!(o.warmup_max_drift_mm_per_s > 0.0 && o.warmup_max_drift_mm_per_s <= 1000.0)) {
+    throw Error(ErrorCode::kInvalidArgument, "--warmup-max-drift-mm-per-s " +
+                                                 std::to_string(o.warmup_max_drift_mm_per_s) +
+                                                 " must be in (0, 1000]");
+  }
   WallCalibrationOptions wall;
   wall.wall_distance_m = o.wall_distance_m;
   wall.frames = o.frames;
@@ -340,6 +366,38 @@ void RunCalibrate(const CalibrateOptions& o) {
   std::unique_ptr<Camera> camera = OpenCamera(o.camera, o.source);
   const CameraInfo camera_info = camera->Info();
   const double range_m = camera_info.unambiguous_range_m();
+  // A recording or an import replays its registers: the exposure control and the exposure-
+  // offset sweep cannot run on it (they used to fail with "cannot change the integration time"
+  // after the averaging). What does work is said now.
+  {
+    const int recorded = camera->IntegrationTimeRegister();
+    bool settable = true;
+    try {
+      const int other =
+          recorded > camera_info.min_integration_register ? recorded - 1 : recorded + 1;
+      camera->SetIntegrationTimeRegister(other);
+      camera->SetIntegrationTimeRegister(recorded);
+    } catch (const Error&) {
+      settable = false;
+    }
+    if (!settable && recorded <= 0) {
+      throw Error(ErrorCode::kUnsupported,
+                  "--camera " + o.camera +
+                      " has no integration-time register (an import): a wall calibration needs "
+                      "a live, simulated or recorded camera");
+    }
+    if (!settable &&
+        (wall.controller.kind != ControllerKind::kFixed ||
+         o.source.integration_time_register != recorded || o.exposure_offset_frames > 0)) {
+      throw Error(ErrorCode::kUnsupported,
+                  "--camera " + o.camera +
+                      " cannot change its integration time (a recording): calibrate it at its "
+                      "register with --controller fixed --integration-register " +
+                      std::to_string(recorded) +
+                      " --exposure-offset-frames 0 (and at least --warmup-max-frames + --frames "
+                      "frames in it)");
+    }
+  }
   if (o.sweep && o.sweep_to_m >= range_m) {
     throw Error(ErrorCode::kInvalidArgument,
                 "--sweep-to-m " + std::to_string(o.sweep_to_m) +
@@ -368,6 +426,16 @@ void RunCalibrate(const CalibrateOptions& o) {
       report.mean_offset_m * 1e3, report.offset_rms_m * 1e3, report.noise_sigma_m * 1e3,
       report.noise_sigma_m * 1e3 / std::sqrt(static_cast<double>(o.frames)), o.frames,
       report.uncalibrated_pixels);
+  // A camera's own offsets are centimetres to a few decimetres; half a metre means the wall is
+  // not where --wall-distance-m says, or the view is not the wall. Said, not refused: a camera
+  // may really be that far off before its first calibration.
+  if (std::abs(report.mean_offset_m) > 0.5 || report.offset_rms_m > 0.5) {
+    std::fprintf(stderr,
+                 "calibrate: warning: offsets of %.0f mm mean and %.0f mm rms are far beyond a "
+                 "camera's fixed-pattern offsets: is the wall at %.3f m (--wall-distance-m), flat, "
+                 "perpendicular and filling the view?\n",
+                 report.mean_offset_m * 1e3, report.offset_rms_m * 1e3, o.wall_distance_m);
+  }
   if (report.exposure_registers.size() >= 2) {
     std::printf("exposure offset: %.4f mm per ms of integration time (shift",
                 calibration.exposure_offset_m_per_ms * 1e3);
@@ -485,6 +553,7 @@ void SetupCalibrateCommand(CLI::App& app) {
                   "Integration-time register to open the camera with (0 = its default)")
       ->capture_default_str();
   sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  AddRos2DomainOption(sub, o->source.ros2_domain);
   sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
   sub->callback([o, sub] {
     CalibrateOptions run = *o;

@@ -19,6 +19,17 @@ std::map<std::string, CommandSetup>& CommandRegistry();
 /// Registers a subcommand; returns true so it can initialise a namespace-scope constant.
 bool RegisterCommand(const std::string& name, CommandSetup setup);
 
+/// `--ros2-domain N` (0..232) for a command that opens camera sources: the DDS domain of a
+/// `ros2:` source whose spec names none (`?domain=`), default 0. Every command with --camera
+/// takes it, as the sources' help line says.
+inline CLI::Option* AddRos2DomainOption(CLI::App* sub, int& domain) {
+  return sub
+      ->add_option("--ros2-domain", domain,
+                   "DDS domain (ROS_DOMAIN_ID), 0..232, of a ros2: camera source")
+      ->check(CLI::Range(0, 232))
+      ->capture_default_str();
+}
+
 }  // namespace tofcam::cli
 
 #define TOFCAM_REGISTER_COMMAND(name, setup)                      \

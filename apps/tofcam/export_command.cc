@@ -29,6 +29,7 @@ struct ExportOptions {
   long long first = 0;
   long long count = -1;
   bool only_valid = false;
+  CameraSourceOptions source;
 };
 
 std::string FrameStem(std::size_t index) {
@@ -85,7 +86,7 @@ void RunExport(const ExportOptions& o) {
     playback->Seek(static_cast<std::size_t>(o.first));
     camera = std::move(playback);
   } else {
-    camera = OpenCamera(o.camera, CameraSourceOptions{});
+    camera = OpenCamera(o.camera, o.source);
     for (long long i = 0; i < o.first; ++i) {
       if (!camera->Grab()) throw Error(ErrorCode::kInvalidArgument, "--first beyond the source");
     }
@@ -132,6 +133,7 @@ void SetupExportCommand(CLI::App& app) {
       app.add_subcommand("export", "Export a recording's frames to PLY, PCD, PNG or CSV files");
   sub->add_option("--in", o->in, "Recording (.h5) to export");
   sub->add_option("--camera", o->camera, "Or any camera source: " + CameraSourceHelp());
+  AddRos2DomainOption(sub, o->source.ros2_domain);
   sub->add_option("--out", o->out, "Output directory (created)")->required();
   sub->add_option("--format", o->format,
                   "ply | pcd (point clouds, camera frame, m) | png (16-bit register images) | "

@@ -273,6 +273,7 @@ void SetupNoiseCheckCommand(CLI::App& app) {
                   "Integration-time register to open the camera with (0 = its default)")
       ->capture_default_str();
   sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  AddRos2DomainOption(sub, o->source.ros2_domain);
   sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
   sub->callback([o] { RunNoiseCheck(*o); });
 }

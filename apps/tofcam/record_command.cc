@@ -80,6 +80,7 @@ void SetupRecordCommand(CLI::App& app) {
                   "Report progress every N frames, after the frame is on disk (0 = every second)")
       ->capture_default_str();
   sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  AddRos2DomainOption(sub, o->source.ros2_domain);
   sub->add_flag("--real-time", o->source.real_time, "Throttle the source to its frame rate");
   sub->add_flag("--loop", o->source.loop, "Loop finite sources (playback, imports)");
   sub->add_option("--integration-time-register", o->source.integration_time_register,

@@ -16,6 +16,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <thread>
 #include <utility>
 
 #include "camera_source.h"
@@ -56,6 +57,33 @@ class SigintGuard {
 
  private:
   void (*previous_)(int) = SIG_DFL;
+};
+
+// Interrupts the camera's Grab() once Ctrl-C is pressed: a ros2: source would otherwise wait for
+// a silent publisher up to its timeout before the loop sees the flag. (A signal handler may not
+// call into the camera; this thread may.)
+class InterruptOnSigint {
+ public:
+  explicit InterruptOnSigint(Camera& camera)
+      : thread_([this, &camera] {
+          while (!done_.load()) {
+            if (g_interrupted.load()) {
+              camera.Interrupt();
+              return;
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+          }
+        }) {}
+  ~InterruptOnSigint() {
+    done_.store(true);
+    thread_.join();
+  }
+  InterruptOnSigint(const InterruptOnSigint&) = delete;
+  InterruptOnSigint& operator=(const InterruptOnSigint&) = delete;
+
+ private:
+  std::atomic<bool> done_{false};
+  std::thread thread_;
 };
 
 struct RunOptions {
@@ -342,6 +370,7 @@ void RunRun(const RunOptions& o) {
   std::int64_t first_timestamp_ns = 0, last_timestamp_ns = 0, status_timestamp_ns = 0;
   bool end_of_stream = false;
 
+  const InterruptOnSigint interrupt_on_sigint(*camera);
   while (done < o.frames && !g_interrupted.load()) {
     std::optional<Frame> frame = done == 0 && first ? std::move(first) : camera->Grab();
     if (!frame) {
@@ -518,6 +547,7 @@ void SetupRunCommand(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--ros2-domain", o->ros2_domain,
                   "DDS domain (ROS_DOMAIN_ID), 0..232, of --ros2 and of a ros2: camera")
+      ->check(CLI::Range(0, 232))
       ->capture_default_str();
   sub->add_option("--ros2-frame-id", o->ros2_frame_id,
                   "header.frame_id: the camera's optical frame (REP 103)")

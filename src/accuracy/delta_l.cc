@@ -340,6 +340,14 @@ DeltaLScaleFit FitDeltaLScale(std::span<const MetricFrame> frames,
     num += sigma[i] * sigma[i] * dl[i] * dl[i];
     den += dl[i] * dl[i] * dl[i] * dl[i];
   }
+  if (!(num > 0.0)) {
+    // Copies of one frame (a looped one-frame source, a frozen driver): scale 0 would be
+    // refused later as an invalid calibration without saying why.
+    throw Error(ErrorCode::kInvalidArgument,
+                "noise fit: no pixel varies from frame to frame (temporal σ 0 at all " +
+                    std::to_string(sigma.size()) +
+                    " usable pixels): the frames are copies (a looped or frozen source?)");
+  }
   fit.scale = std::sqrt(num / den);
   std::vector<double> ratio(sigma.size());
   double ss_res = 0.0, ss_tot = 0.0, rel = 0.0, mean_sigma = 0.0;

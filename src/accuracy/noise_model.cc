@@ -337,6 +337,13 @@ NoiseModelFit FitNoiseModel(std::span<const MetricFrame> frames,
         std::to_string(test.size()) + " held-out pixels usable in every frame, need " +
         std::to_string(options.min_pixels) + " each (is the scene static and lit?)");
   }
+  // Frames that never change (a looped one-frame source, a frozen driver) have no temporal
+  // noise to predict: every verdict would be vacuous ("eq. 2, scale 0, within 25 %").
+  if (std::none_of(samples.begin(), samples.end(),
+                   [](const PixelSample& p) { return p.sigma_m > 0.0; })) {
+    Bad("noise model fit: no pixel varies from frame to frame (temporal σ 0 everywhere): the "
+        "frames are copies of each other (a looped or frozen source?)");
+  }
 
   // ln s of N frames is biased low against ln σ; only the intercept absorbs that, and
   // MatchVariance sets the intercept. s = 0 (identical readings, a quantised camera) is floored

@@ -385,7 +385,8 @@ void WallCalibrationOptions::Validate() const {
     Bad("warmup_max_drift_m_per_s", warmup_max_drift_m_per_s, "must be in (0, 1]");
   }
   if (warmup_max_frames < warmup_window_frames) {
-    Bad("warmup_max_frames", warmup_max_frames, "must be >= warmup_window_frames");
+    Bad("warmup_max_frames", warmup_max_frames,
+        "must be >= warmup_window_frames (" + std::to_string(warmup_window_frames) + ")");
   }
   if (!(min_valid_fraction > 0.0 && min_valid_fraction <= 1.0)) {
     Bad("min_valid_fraction", min_valid_fraction, "must be in (0, 1]");

@@ -2,10 +2,8 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -25,29 +23,21 @@ double AngleBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b));
 }
 
+}  // namespace
+
+void NoRay(double u, double v) {
+  throw Error(ErrorCode::kInvalidArgument,
+              "intrinsics: the distortion cannot be inverted at pixel (" + std::to_string(u) +
+                  ", " + std::to_string(v) + "): it has no ray");
+}
+
 // A lens model whose distortion folds over inside the image maps two directions to one pixel
 // and leaves some pixels without a ray on the first branch (Undistort then fails or lands on
 // the fold's far side): the corners alone cannot show it. Along rays from the optical axis in
 // 32 directions (and through the four corners), the distortion must stay one to one (positive
 // Jacobian, growing distorted radius) out to the largest distorted radius any pixel has.
-void CheckDistortionUnfolds(const CameraIntrinsics& k) {
-  // The last lens that passed, per thread: a ROS 2 source validates every CameraInfo it takes.
-  thread_local std::optional<std::array<double, 14>> passed;
-  const std::array<double, 14> lens = {static_cast<double>(k.width),
-                                       static_cast<double>(k.height),
-                                       k.fx_px,
-                                       k.fy_px,
-                                       k.cx_px,
-                                       k.cy_px,
-                                       k.k1,
-                                       k.k2,
-                                       k.k3,
-                                       k.k4,
-                                       k.k5,
-                                       k.k6,
-                                       k.p1,
-                                       k.p2};
-  if (passed == lens) return;
+void RequireUnfoldedDistortion(const CameraIntrinsics& k) {
+  if (!k.HasDistortion()) return;
   double rho_max = 0.0;  // distorted normalised radius of the farthest image corner
   std::vector<double> angles;
   for (double u : {-0.5, k.width - 0.5}) {
@@ -86,15 +76,6 @@ void CheckDistortionUnfolds(const CameraIntrinsics& k) {
       last_rho = rho;
     }
   }
-  passed = lens;
-}
-
-}  // namespace
-
-void NoRay(double u, double v) {
-  throw Error(ErrorCode::kInvalidArgument,
-              "intrinsics: the distortion cannot be inverted at pixel (" + std::to_string(u) +
-                  ", " + std::to_string(v) + "): it has no ray");
 }
 
 CameraIntrinsics CameraIntrinsics::SwissRangerSr2() {
@@ -141,7 +122,6 @@ void CameraIntrinsics::Validate() const {
       }
     }
   }
-  if (HasDistortion()) CheckDistortionUnfolds(*this);
 }
 
 bool CameraIntrinsics::HasDistortion() const noexcept {
@@ -206,7 +186,6 @@ RayTable MakeRayTable(const CameraIntrinsics& k) {
   for (int r = 0; r < k.height; ++r) {
     for (int c = 0; c < k.width; ++c) {
       const Eigen::Vector3d ray = k.Unproject({static_cast<double>(c), static_cast<double>(r)});
-      if (!ray.allFinite()) NoRay(c, r);
       t.x(r, c) = static_cast<float>(ray.x());
       t.y(r, c) = static_cast<float>(ray.y());
       t.z(r, c) = static_cast<float>(ray.z());

@@ -687,11 +687,35 @@ ImportedSequence ImportFromSpec(const std::string& spec) {
     return ImportAdiRaw(depth, depth.parent_path() / ir_name);
   }
   if (format == "azure-kinect") {
-    if (parts.size() == 3) return ImportAzureKinect(parts[0], parts[1], parts[2]);
+    // The depth mode follows from the image size (ImportAzureKinect): from the depth file's
+    // size, or from which depth_<W>x<H>_u16le.bin a directory holds.
+    constexpr int kModes[4][2] = {{640, 576}, {320, 288}, {512, 512}, {1024, 1024}};
+    if (parts.size() == 3) {
+      std::error_code ec;
+      const auto bytes = std::filesystem::file_size(parts[0], ec);
+      for (const auto& m : kModes) {
+        if (!ec && bytes == 2ull * static_cast<unsigned>(m[0]) * static_cast<unsigned>(m[1])) {
+          return ImportAzureKinect(parts[0], parts[1], parts[2], m[0], m[1]);
+        }
+      }
+      if (ec) return ImportAzureKinect(parts[0], parts[1], parts[2]);  // names the missing file
+      throw Error(ErrorCode::kFormat,
+                  parts[0] + ": " + std::to_string(bytes) +
+                      " bytes is no Azure Kinect depth mode (uint16 640x576, 320x288, 512x512 "
+                      "or 1024x1024)");
+    }
     if (parts.size() != 1) throw bad("expected <dir> or <depth.bin>,<ir.bin>,<calibration.json>");
     const std::filesystem::path dir = parts[0];
+    for (const auto& m : kModes) {
+      const std::string size = std::to_string(m[0]) + "x" + std::to_string(m[1]);
+      const std::filesystem::path depth = dir / ("depth_" + size + "_u16le.bin");
+      if (std::filesystem::exists(depth)) {
+        return ImportAzureKinect(depth, dir / ("ir_" + size + "_u16le.bin"),
+                                 dir / "calibration.json", m[0], m[1]);
+      }
+    }
     return ImportAzureKinect(dir / "depth_640x576_u16le.bin", dir / "ir_640x576_u16le.bin",
-                             dir / "calibration.json");
+                             dir / "calibration.json");  // names the missing file
   }
   std::string known;
   for (const auto& f : ImportFormats()) known += (known.empty() ? "" : ", ") + f;
@@ -703,13 +727,21 @@ ImportedSequence ImportFromSpec(const std::string& spec) {
 
 std::optional<double> SelfCalibratedNoiseScale(const std::vector<Frame>& frames) {
   if (frames.size() < 3) return std::nullopt;
+  // The metric copies and their ΔL images (about 22 bytes a pixel) of every frame would triple
+  // what the importer already holds: the first frames up to 2^22 pixels in all (at least
+  // three) are plenty for σ per pixel.
+  constexpr std::size_t kMaxPixels = std::size_t{1} << 22;
+  const std::size_t per_frame = std::max<std::size_t>(frames.front().distance.size(), 1);
+  const std::size_t used =
+      std::min(frames.size(), std::max<std::size_t>(3, kMaxPixels / per_frame));
   std::vector<MetricFrame> metric;
-  metric.reserve(frames.size());
-  for (const Frame& f : frames) {
+  metric.reserve(used);
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const Frame& f = frames[k];
     if (f.width() != frames.front().width() || f.height() != frames.front().height()) {
       return std::nullopt;
     }
-    metric.push_back(ConvertToMetric(f));
+    if (k < used) metric.push_back(ConvertToMetric(f));
   }
   try {
     // No gate on R²: σ from 3 frames has a relative error of ~70 % per pixel, so R² is near 0

@@ -1,5 +1,7 @@
 #include "tofcam/ros2/ros2_camera.h"
 
+#include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -66,6 +68,8 @@ struct Ros2Camera::Impl {
   std::string last_skip;
   std::uint64_t sequence = 0;
   std::int64_t first_stamp_ns = 0;
+  std::int64_t last_stamp_ns = 0;        // of the last frame served
+  std::atomic<bool> interrupted{false};  // Interrupt(): Grab() returns nullopt
 
   explicit Impl(const Ros2CameraOptions& o) : options(o), participant(o.domain_id) {}
 
@@ -161,6 +165,15 @@ struct Ros2Camera::Impl {
         // Anything older on this channel can no longer pair.
         pending[c].erase(pending[c].begin(), std::next(it));
       }
+      if (sequence > 0 && stamp <= last_stamp_ns) {
+        // Served frames' timestamps only grow (a recording refuses anything else): a frame
+        // stamped at or before the last one (a restarted publisher, a clock set back) is
+        // skipped, and the stream goes on once the stamps pass the last frame's.
+        Skip(names[kDepth] + ": stamp " + std::to_string(stamp) +
+             " ns is not after the previous frame's " + std::to_string(last_stamp_ns) +
+             " ns (publisher restarted or its clock went back?)");
+        continue;
+      }
       try {
         Frame f = FrameFromImages(depth, *parts[kAmplitude],
                                   parts[kIntensity] ? &*parts[kIntensity] : nullptr, rays,
@@ -168,6 +181,7 @@ struct Ros2Camera::Impl {
         if (sequence == 0) first_stamp_ns = stamp;
         f.info.sequence = sequence++;
         f.info.timestamp_ns = stamp - first_stamp_ns;
+        last_stamp_ns = stamp;
         return f;
       } catch (const Error& e) {
         Skip(e.what());
@@ -235,6 +249,7 @@ std::optional<Frame> Ros2Camera::Grab() {
   Impl& m = *impl_;
   const auto deadline = Clock::now() + std::chrono::duration<double>(m.options.timeout_s);
   while (true) {
+    if (m.interrupted.load()) return std::nullopt;
     for (int c = 0; c < kChannels; ++c) {
       if (m.Active(c)) m.TakeImages(c);
     }
@@ -255,6 +270,8 @@ std::optional<Frame> Ros2Camera::Grab() {
 }
 
 const tofcam::CameraInfo& Ros2Camera::Info() const { return impl_->camera; }
+
+void Ros2Camera::Interrupt() noexcept { impl_->interrupted.store(true); }
 
 namespace {
 [[noreturn]] void Unsupported(const std::string& what) {

@@ -21,6 +21,7 @@ void Require(bool ok, const std::string& what) {
 
 void CameraModel::Validate() const {
   intrinsics.Validate();
+  RequireUnfoldedDistortion(intrinsics);  // every simulated pixel casts rays
   Require(!name.empty(), "name must not be empty");
   Require(name.size() <= kMaxNameBytes, "name is " + std::to_string(name.size()) +
                                             " bytes, at most " + std::to_string(kMaxNameBytes));

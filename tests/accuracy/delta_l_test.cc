@@ -192,6 +192,15 @@ TEST(DeltaLFitTest, SkipsInvalidPixelsAndRejectsTooFewFrames) {
   EXPECT_THROW((void)FitDeltaLScale(frames), Error);
   frames[1] = MakeMetric(3, 3, 1, 1);
   EXPECT_THROW((void)FitDeltaLScale(frames), Error);
+  // Copies of one frame: σ = 0 everywhere, a scale of 0 that a calibration then refused
+  // without saying why. Now the fit says so itself.
+  const std::vector<MetricFrame> copies(5, FourTapFrames(1.0, 1, 3).front());
+  try {
+    (void)FitDeltaLScale(copies);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("copies"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

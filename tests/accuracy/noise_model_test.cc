@@ -327,6 +327,10 @@ TEST(NoiseModel, BadInputIsAClearError) {
   auto flagged = frames;
   for (auto& f : flagged) f.flags.Fill(PixelFlags(Flag::kInvalid));
   EXPECT_EQ(code([&] { (void)FitNoiseModel(flagged, {}); }), ErrorCode::kInvalidArgument);
+  // Copies of one frame (a looped one-frame source) have no noise to predict: an error, not a
+  // fit of scale 0 that "predicts every decile".
+  const std::vector<MetricFrame> copies(5, frames.front());
+  EXPECT_EQ(code([&] { (void)FitNoiseModel(copies, {}); }), ErrorCode::kInvalidArgument);
   NoiseModel m;
   m.log_amplitude = std::nan("");
   EXPECT_EQ(code([&] { m.Validate(); }), ErrorCode::kInvalidArgument);

@@ -594,6 +594,38 @@ TEST(MesaDat, RealLayoutErrorsNameTheProblem) {
 // ------------------------------------------------------------------------------------------
 // Dispatch and ImportedCamera
 
+// The spec form takes the depth mode from the depth file's size (the docs promised four modes;
+// the spec used to assume 640 x 576 and refuse a WFOV binned pair).
+TEST_F(ImportTest, AzureKinectSpecTakesTheModeFromTheFileSize) {
+  const fs::path calibration = kReal / "azure_kinect" / "calibration.json";
+  const auto write = [&](const std::string& name, std::size_t pixels, std::uint16_t value) {
+    std::vector<std::uint16_t> v(pixels, value);
+    std::ofstream(dir_ / name, std::ios::binary)
+        .write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(2 * pixels));
+  };
+  write("d.bin", 512 * 512, 1500);
+  write("ir.bin", 512 * 512, 300);
+  const ImportedSequence wfov =
+      ImportFromSpec("azure-kinect:" + (dir_ / "d.bin").string() + "," +
+                     (dir_ / "ir.bin").string() + "," + calibration.string());
+  EXPECT_EQ(wfov.camera.width(), 512);
+  EXPECT_EQ(wfov.camera.height(), 512);
+  // The same intrinsics as the mode's parse of the calibration.
+  const CameraIntrinsics k =
+      ParseAzureKinectCalibration(ReadFile(calibration), 512, 512, calibration.string());
+  EXPECT_DOUBLE_EQ(wfov.camera.intrinsics.fx_px, k.fx_px);
+  // The directory form finds the mode's files by name.
+  write("depth_320x288_u16le.bin", 320 * 288, 1500);
+  write("ir_320x288_u16le.bin", 320 * 288, 300);
+  fs::copy_file(calibration, dir_ / "calibration.json");
+  EXPECT_EQ(ImportFromSpec("azure-kinect:" + dir_.string()).camera.width(), 320);
+  // A size that is no mode names the modes.
+  write("odd.bin", 1000, 0);
+  const std::string spec = "azure-kinect:" + (dir_ / "odd.bin").string() + "," +
+                           (dir_ / "ir.bin").string() + "," + calibration.string();
+  EXPECT_EQ(CodeOf([&] { (void)ImportFromSpec(spec); }), ErrorCode::kFormat);
+}
+
 TEST(ImportFromSpec, UnknownFormatsAndBadSpecs) {
   EXPECT_EQ(CodeOf([] { (void)ImportFromSpec("kinect-v1:/x"); }), ErrorCode::kInvalidArgument);
   EXPECT_EQ(CodeOf([] { (void)ImportFromSpec("adi-raw"); }), ErrorCode::kInvalidArgument);

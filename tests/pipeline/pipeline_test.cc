@@ -923,6 +923,42 @@ TEST_F(RunCommandTest, CalibrateScatteringAndRunWithIt) {
   EXPECT_NE(Stderr().find("--scattering-frames"), std::string::npos) << Stderr();
 }
 
+// Sources the later phases of a calibration open are checked before the wall calibration runs:
+// a wrong --scattering-target or a --sweep on a camera whose wall cannot move used to fail after
+// it, with nothing written. A recording cannot change its exposure: said with what works.
+TEST_F(RunCommandTest, CalibrateChecksItsSourcesBeforeTheWall) {
+  const auto quick = [&](const std::string& args) {
+    const int status = Run(args);
+    // Refused before any phase ran: no progress line ("calibrate: <phase> n/N ...").
+    EXPECT_EQ(Stderr().find("calibrate: "), std::string::npos) << args << "\n" << Stderr();
+    return status;
+  };
+  const std::string out = " --out " + (dir_ / "c.yaml").string();
+  EXPECT_NE(quick("calibrate --camera 'sim:wall?distance_m=2' --wall-distance-m 2 "
+                  "--scattering-target file:" +
+                  (dir_ / "nosuch.h5").string() + out),
+            0);
+  EXPECT_NE(Stderr().find("--scattering-target"), std::string::npos) << Stderr();
+  ASSERT_EQ(Run("record --camera 'sim:wall?distance_m=2' --frames 3 --integration-time-register "
+                "32 --out " +
+                (dir_ / "wall.h5").string()),
+            0)
+      << Stderr();
+  const std::string recorded = " --camera file:" + (dir_ / "wall.h5").string();
+  EXPECT_NE(quick("calibrate" + recorded +
+                  " --wall-distance-m 2 --controller fixed "
+                  "--integration-register 32 --exposure-offset-frames 0 --sweep" +
+                  out),
+            0);
+  EXPECT_NE(Stderr().find("--sweep moves the wall"), std::string::npos) << Stderr();
+  EXPECT_NE(quick("calibrate" + recorded + " --wall-distance-m 2" + out), 0);
+  EXPECT_NE(
+      Stderr().find("--controller fixed --integration-register 32 --exposure-offset-frames 0"),
+      std::string::npos)
+      << Stderr();
+  EXPECT_FALSE(fs::exists(dir_ / "c.yaml"));
+}
+
 TEST_F(RunCommandTest, PrintConfigIsALoadableConfig) {
   std::string text;
   ASSERT_EQ(Run("run --print-config --controller vendor-histogram", &text), 0) << Stderr();

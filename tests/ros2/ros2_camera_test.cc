@@ -7,6 +7,7 @@
 #include <dds/dds.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
@@ -195,6 +196,68 @@ TEST(Ros2Camera, PairsImagesByStampAndCountsTheUnpaired) {
   EXPECT_EQ(skipped, 1u);
   EXPECT_NE(last_skip.find("/t15/tiny/depth: image without a partner"), std::string::npos)
       << last_skip;
+}
+
+// A publisher that restarts (stamps going back) must not give frames whose timestamps
+// decrease (a recording refuses them, `run` wrote negative times): the older frame is skipped
+// and counted, and the stream goes on with the next newer one. Then Interrupt() ends a Grab()
+// that waits for a silent publisher long before its 30 s timeout (how `view` and `run` stop).
+TEST(Ros2Camera, OlderStampsAreSkippedAndInterruptEndsAWaitingGrab) {
+  const int domain = ClaimDomain();
+  ASSERT_GE(domain, 0);
+  UseLoopbackOnly();
+  TinyDriver driver(domain, "/t15/back");
+  std::atomic<bool> first_served{false};
+  std::thread sender([&] {
+    ASSERT_TRUE(driver.WaitForReader());
+    driver.Info();
+    driver.Image(true, 5, 5000);
+    driver.Image(false, 5, 500);
+    driver.Flush();
+    for (int i = 0; i < 1000 && !first_served.load(); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    driver.Image(true, 3, 3000);  // before the frame served: skipped
+    driver.Image(false, 3, 300);
+    driver.Image(true, 6, 6000);
+    driver.Image(false, 6, 600);
+    driver.Flush();
+  });
+  std::optional<Frame> f5, f6, end;
+  std::uint64_t skipped = 0;
+  std::string last_skip;
+  double waited_s = 0;
+  try {
+    ros2::Ros2Camera camera(ParseRos2CameraSpec("/t15/back?reliable=1&timeout_s=30", domain));
+    f5 = camera.Grab();
+    first_served = true;
+    f6 = camera.Grab();
+    skipped = camera.skipped();
+    last_skip = camera.last_skip();
+    sender.join();
+    std::thread stopper([&] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      camera.Interrupt();
+    });
+    const auto t0 = std::chrono::steady_clock::now();
+    end = camera.Grab();
+    waited_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    stopper.join();
+  } catch (...) {
+    if (sender.joinable()) sender.join();
+    throw;
+  }
+  ASSERT_TRUE(f5.has_value());
+  ASSERT_TRUE(f6.has_value());
+  EXPECT_EQ(f5->amplitude[0], 500);
+  EXPECT_EQ(f6->amplitude[0], 600);
+  EXPECT_EQ(f6->info.timestamp_ns, 1'000'000'000);  // 6 s - 5 s
+  EXPECT_EQ(skipped, 1u);
+  EXPECT_NE(last_skip.find("not after the previous frame"), std::string::npos) << last_skip;
+  EXPECT_FALSE(end.has_value());
+  // The Grab waits in slices of 0.5 s; 10 s leaves room for a loaded machine and is a third of
+  // the timeout the wait would otherwise have run to.
+  EXPECT_LT(waited_s, 10.0);
 }
 
 struct RunOutput {

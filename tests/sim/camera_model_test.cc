@@ -88,6 +88,11 @@ TEST(CameraModelTest, ErrorsNameSourceLineAndField) {
     EXPECT_EQ(e.code(), ErrorCode::kFormat);  // not an internal yaml-cpp error
     EXPECT_NE(std::string(e.what()).find("m.yaml"), std::string::npos) << e.what();
   }
+  // A lens that folds over inside the image (tests/core/camera_intrinsics_test.cc derives the
+  // fold): the simulator cannot give those pixels a ray (Embree aborted on the NaN rays).
+  EXPECT_THROW(
+      (void)ParseCameraModel("intrinsics: {fx_px: 80, fy_px: 80, k1: -0.3, k2: 0.02}\n", "m.yaml"),
+      Error);
   EXPECT_THROW((void)ParseCameraModel("tap_duty: abc\n", "m.yaml"), Error);
   EXPECT_THROW((void)ParseCameraModel("default_integration_register: 300\n", "m.yaml"), Error);
   EXPECT_THROW(

@@ -9,8 +9,11 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
@@ -166,8 +169,23 @@ TEST_F(ViewerServerTest, FramesAreTheDocumentedBinaryAndSkippedFramesAreCounted)
   // Nothing newer within the wait: 204, not a stale frame.
   ASSERT_EQ(server_->ApplyControl(R"({"paused": true})"), "");
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  const long long now = server_->Status().frames + 1000;
-  EXPECT_EQ(client_->Get("/frame?after=" + std::to_string(now))->status, 204);
+  const auto latest = client_->Get("/frame?after=0");
+  ASSERT_TRUE(latest && latest->status == 200);
+  std::memcpy(prefix, latest->body.data(), 12);
+  const json latest_header = json::parse(latest->body.substr(12, prefix[2]));
+  const long long newest = latest_header.at("seq");
+  EXPECT_EQ(client_->Get("/frame?after=" + std::to_string(newest))->status, 204);
+  // A frame number this server never sent (a page of an earlier server on the port) gets the
+  // latest frame at once, with this server's session, which /meta reports too.
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto stale = client_->Get("/frame?after=" + std::to_string(newest + 1000));
+  ASSERT_TRUE(stale);
+  EXPECT_EQ(stale->status, 200);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(1500));
+  const std::string session = json::parse(client_->Get("/meta")->body).at("session");
+  EXPECT_FALSE(session.empty());
+  EXPECT_EQ(latest_header.at("session"), session);
+  EXPECT_EQ(latest_header.at("last_error"), "");
 }
 
 TEST_F(ViewerServerTest, ControlsApplyToTheNextFrames) {
@@ -248,6 +266,130 @@ TEST_F(ViewerServerTest, ControlsApplyToTheNextFrames) {
     const RecordingReader reader(file);  // refuses decreasing timestamps
     EXPECT_GE(reader.frame_count(), 1u) << file;
   }
+}
+
+TEST_F(ViewerServerTest, StepsNeedAPauseAndRefusalsAreImmediate) {
+  std::string reply;
+  // While running, steps would pile up and run on after the next pause.
+  EXPECT_EQ(Post(R"({"step": 1000})", &reply), 400);
+  EXPECT_NE(reply.find("paused"), std::string::npos) << reply;
+  ASSERT_EQ(Post(R"({"paused": true, "step": 1})"), 200);  // one request: fine
+  ASSERT_EQ(Post(R"({"paused": false})"), 200);
+  // Numbers beyond 2^63 are named as sent, not as a wrapped negative number.
+  EXPECT_EQ(Post(R"({"bias_register": 18446744073709551615})", &reply), 400);
+  EXPECT_NE(reply.find("18446744073709551615"), std::string::npos) << reply;
+  // A recording directory that cannot be written: refused at once (the page used to show
+  // "recording" while the loop had failed).
+  { std::ofstream(record_dir_) << "a file, not a directory"; }
+  EXPECT_EQ(Post(R"({"record": "start"})", &reply), 400);
+  EXPECT_NE(reply.find("recording"), std::string::npos) << reply;
+  ASSERT_TRUE(WaitFrames(2));
+  EXPECT_TRUE(server_->Status().recording.empty());
+}
+
+// A camera without a pan unit (a stand-in for a recording or a ROS 2 source, which report
+// their angles but cannot turn): the page is not offered the pan control, and a request for it
+// is refused instead of answered "ok".
+class FixedMountCamera final : public Camera {
+ public:
+  explicit FixedMountCamera(std::unique_ptr<Camera> inner) : inner_(std::move(inner)) {}
+  std::optional<Frame> Grab() override { return inner_->Grab(); }
+  const CameraInfo& Info() const override { return inner_->Info(); }
+  void SetIntegrationTimeRegister(int reg) override { inner_->SetIntegrationTimeRegister(reg); }
+  int IntegrationTimeRegister() const override { return inner_->IntegrationTimeRegister(); }
+  void SetModulationFrequencyHz(double hz) override { inner_->SetModulationFrequencyHz(hz); }
+  void SetDistanceOffsetRegister(int reg) override { inner_->SetDistanceOffsetRegister(reg); }
+  int DistanceOffsetRegister() const override { return inner_->DistanceOffsetRegister(); }
+  void SetPanAngleRad(double angle_rad) override {
+    if (angle_rad != 0.0) throw Error(ErrorCode::kUnsupported, "no pan unit");
+  }
+  double PanAngleRad() const override { return 0.0; }
+
+ private:
+  std::unique_ptr<Camera> inner_;
+};
+
+TEST(ViewerServerStandalone, PanIsOfferedOnlyWhereThereIsAPanUnit) {
+  ViewerOptions o;
+  o.port = 0;
+  o.camera_spec = "fixed:hand";
+  ViewerServer server(o, PipelineOptions{}, [](const std::string&) {
+    return std::make_unique<FixedMountCamera>(OpenSim("sim:hand"));
+  });
+  server.Start();
+  httplib::Client client("127.0.0.1", server.port());
+  client.set_read_timeout(5, 0);
+  EXPECT_FALSE(json::parse(client.Get("/meta")->body).at("pan_supported").get<bool>());
+  const auto r = client.Post("/control", R"({"pan_deg": 30})", "application/json");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 400);
+  server.Stop();
+}
+
+// A scene change reopens the simulator without the lock; controls another request commits in
+// that time must survive it (the scene's request used to write back the state it had copied
+// before). The opener blocks until the second request is in, so the order is certain.
+TEST(ViewerServerStandalone, ControlsSentDuringASceneChangeAreKept) {
+  std::mutex m;
+  std::condition_variable cv;
+  bool opening = false, release = false;
+  int opened = 0;
+  ViewerOptions o;
+  o.port = 0;
+  o.camera_spec = "sim:hand";
+  ViewerServer server(o, PipelineOptions{}, [&](const std::string& spec) {
+    std::unique_lock<std::mutex> lock(m);
+    if (opened++ > 0) {  // not the constructor's open
+      opening = true;
+      cv.notify_all();
+      cv.wait_for(lock, std::chrono::seconds(10), [&] { return release; });
+    }
+    return OpenSim(spec);
+  });
+  server.Start();
+  std::string scene_reply = "unset";
+  std::thread scene(
+      [&] { scene_reply = server.ApplyControl(R"({"scene": {"hand_distance_m": 0.5}})"); });
+  {
+    std::unique_lock<std::mutex> lock(m);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return opening; }));
+  }
+  EXPECT_EQ(server.ApplyControl(R"({"filters": {"jump_edge": true}, "paused": true})"), "");
+  {
+    std::lock_guard<std::mutex> lock(m);
+    release = true;
+  }
+  cv.notify_all();
+  scene.join();
+  EXPECT_EQ(scene_reply, "");
+  httplib::Client client("127.0.0.1", server.port());
+  client.set_read_timeout(5, 0);
+  const json meta = json::parse(client.Get("/meta")->body);
+  EXPECT_TRUE(meta.at("filters").at("jump_edge").get<bool>());
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  EXPECT_TRUE(server.Status().paused);
+  server.Stop();
+}
+
+// Any 127.x.y.z is loopback: a Host that is neither the bound address nor a loopback name is
+// refused there too (DNS rebinding used to pass on 127.0.0.2).
+TEST(ViewerServerStandalone, AnotherLoopbackAddressStillChecksTheHost) {
+  ViewerOptions o;
+  o.port = 0;
+  o.bind_address = "127.0.0.2";
+  o.camera_spec = "sim:hand";
+  ViewerServer server(o, PipelineOptions{}, OpenSim);
+  server.Start();
+  httplib::Client client("127.0.0.2", server.port());
+  client.set_read_timeout(5, 0);
+  const std::string port = ":" + std::to_string(server.port());
+  const auto foreign = client.Get("/status", {{"Host", "rebind.evil.example" + port}});
+  ASSERT_TRUE(foreign);
+  EXPECT_EQ(foreign->status, 403);
+  const auto own = client.Get("/status", {{"Host", "127.0.0.2" + port}});
+  ASSERT_TRUE(own);
+  EXPECT_EQ(own->status, 200);
+  server.Stop();
 }
 
 TEST_F(ViewerServerTest, TheDenoiseToggleLowersTheFramesDeltaL) {

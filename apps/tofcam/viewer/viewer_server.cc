@@ -66,6 +66,21 @@ struct Desired {
   std::string camera_spec;
 };
 
+// Most frames a paused camera may have queued to step through.
+constexpr int kMaxSteps = 1000;
+
+// One request's controls applied to a copy of Desired (ViewerServer::Impl::Stage).
+struct Staged {
+  PipelineOptions pipeline;
+  bool paused = false;
+  int step = 0;
+  std::optional<double> pan;
+  int record = 0;
+  std::string spec;
+  bool reopen = false;   // the source is to be reopened with `spec`
+  bool changed = false;  // a pipeline key: rebuild the pipeline
+};
+
 // Type-checked readers for one control value; they throw std::string (the 400 reason).
 double Number(const json& v, const std::string& key, double lo, double hi, bool lo_open = false) {
   if (!v.is_number()) throw std::string("control '" + key + "' must be a number");
@@ -81,6 +96,11 @@ double Number(const json& v, const std::string& key, double lo, double hi, bool 
 
 int Integer(const json& v, const std::string& key, int lo, int hi) {
   if (!v.is_number_integer()) throw std::string("control '" + key + "' must be an integer");
+  if (v.is_number_unsigned() && v.get<unsigned long long>() > static_cast<unsigned>(hi)) {
+    // Above 2^63 a signed read would wrap to a negative number in the message.
+    throw "control '" + key + "' = " + std::to_string(v.get<unsigned long long>()) +
+        " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+  }
   const long long x = v.get<long long>();
   if (x < lo || x > hi) {
     throw "control '" + key + "' = " + std::to_string(x) + " is outside [" + std::to_string(lo) +
@@ -157,10 +177,16 @@ void ViewerOptions::Validate() const {
 struct ViewerServer::Impl {
   ViewerOptions options;
   CameraOpener opener;
+  // The loop's source. camera_mutex guards the pointer (the loop replaces it on a scene change)
+  // against Stop(), which interrupts a Grab() waiting for a silent live source.
+  std::mutex camera_mutex;
   std::unique_ptr<Camera> camera;
   CameraInfo info;
   bool pan_supported = false;
   std::string three_js, orbit_js;
+  // This server instance's id: a page left open across a restart sees it change and reloads
+  // (frame numbers start again at 1, and the camera may be another).
+  std::string session;
 
   // Control state (HTTP threads write, the loop reads).
   mutable std::mutex control_mutex;
@@ -190,6 +216,8 @@ struct ViewerServer::Impl {
   std::string RaysBinary(const Pipeline& pipeline) const;
   std::string rays;  // built once by the constructor
   std::string Control(const std::string& body);
+  std::string Stage(const json& j, Staged& s) const;
+  void CheckRecordDir() const;
   void Loop();
   void Routes();
   bool HostAllowed(const httplib::Request& req) const;
@@ -198,14 +226,20 @@ struct ViewerServer::Impl {
 bool ViewerServer::Impl::HostAllowed(const httplib::Request& req) const {
   const std::string host = req.get_header_value("Host");
   const std::string p = ":" + std::to_string(port);
-  const bool loopback = options.bind_address == "127.0.0.1" ||
-                        options.bind_address == "localhost" || options.bind_address == "::1";
+  const std::string& bind = options.bind_address;
+  // Any 127.x.y.z is loopback, not only 127.0.0.1.
+  const bool loopback = bind == "localhost" || bind == "::1" || bind.rfind("127.", 0) == 0;
+  const bool wildcard = bind == "0.0.0.0" || bind == "::";
+  const bool as_bound = host == bind + p || host == "[" + bind + "]" + p;
   bool ok;
   if (loopback) {
-    ok = host == "127.0.0.1" + p || host == "localhost" + p || host == "[::1]" + p ||
-         host == options.bind_address + p;
+    ok = as_bound || host == "127.0.0.1" + p || host == "localhost" + p || host == "[::1]" + p;
+  } else if (!wildcard) {
+    // One address: the page is opened by that address. A name that a foreign site resolves
+    // to it (DNS rebinding) is refused.
+    ok = as_bound;
   } else {
-    ok = !host.empty();  // bound elsewhere on purpose: any name of this machine
+    ok = !host.empty();  // every address of this machine, by any name (docs/viewer.md)
   }
   const std::string origin = req.get_header_value("Origin");
   // A page of another origin (DNS rebinding, a foreign site) must not steer the camera.
@@ -216,6 +250,7 @@ bool ViewerServer::Impl::HostAllowed(const httplib::Request& req) const {
 std::string ViewerServer::Impl::MetaJson() const {
   json m;
   m["camera"] = options.camera_spec;
+  m["session"] = session;
   m["model"] = info.model;
   m["width"] = info.width();
   m["height"] = info.height();
@@ -269,28 +304,25 @@ std::string ViewerServer::Impl::RaysBinary(const Pipeline& pipeline) const {
   return out;
 }
 
-std::string ViewerServer::Impl::Control(const std::string& body) {
-  json j;
-  try {
-    j = json::parse(body);
-  } catch (const json::exception&) {
-    return "the body is not valid JSON";
-  }
-  if (!j.is_object()) return "the body must be a JSON object of controls";
-  std::unique_lock<std::mutex> lock(control_mutex);
-  PipelineOptions p = desired.pipeline;
-  bool paused = desired.paused;
-  int step = desired.step;
-  std::optional<double> pan = desired.pan_rad;
-  int record = desired.record;
-  std::string spec = desired.camera_spec;
-  bool reopen = false;
+// The request's controls applied to a copy of the desired state (the caller holds the lock), or
+// the 400 reason. Run again after a scene reopens: whatever other requests committed meanwhile is
+// the base then, so a slow scene change never writes back a state older than theirs.
+std::string ViewerServer::Impl::Stage(const json& j, Staged& s) const {
+  s = Staged{};
+  s.pipeline = desired.pipeline;
+  s.paused = desired.paused;
+  s.step = desired.step;
+  s.pan = desired.pan_rad;
+  s.record = desired.record;
+  s.spec = desired.camera_spec;
+  int steps = 0;
   try {
     for (const auto& [key, v] : j.items()) {
+      PipelineOptions& p = s.pipeline;
       if (key == "paused") {
-        paused = Bool(v, key);
+        s.paused = Bool(v, key);
       } else if (key == "step") {
-        step += Integer(v, key, 1, 1000);
+        steps = Integer(v, key, 1, kMaxSteps);
       } else if (key == "controller") {
         if (!v.is_string()) throw std::string("control 'controller' must be a string");
         if (v.get<std::string>() == "none") {
@@ -353,7 +385,7 @@ std::string ViewerServer::Impl::Control(const std::string& body) {
         p.uncertainty.max_uncertainty_m = Number(v, key, 0.0, 100.0, true);
       } else if (key == "pan_deg") {
         if (!pan_supported) throw std::string("this source has no pan unit");
-        pan = Number(v, key, -180.0, 180.0) * M_PI / 180.0;
+        s.pan = Number(v, key, -180.0, 180.0) * M_PI / 180.0;
       } else if (key == "scene") {
         if (options.camera_spec.rfind("sim:", 0) != 0) {
           throw std::string("scene parameters need a simulated source (sim:...)");
@@ -361,33 +393,75 @@ std::string ViewerServer::Impl::Control(const std::string& body) {
         if (!v.is_object() || v.size() > 16) {
           throw std::string("control 'scene' must be an object of at most 16 parameters");
         }
-        spec = WithSceneParameters(spec, v);
-        reopen = true;
+        s.spec = WithSceneParameters(s.spec, v);
+        s.reopen = true;
       } else if (key == "record") {
         if (!v.is_string() || (v != "start" && v != "stop")) {
           throw std::string("control 'record' must be \"start\" or \"stop\"");
         }
-        record = v == "start" ? 1 : -1;
+        s.record = v == "start" ? 1 : -1;
+        if (s.record > 0) CheckRecordDir();
       } else {
         throw std::string("unknown control '" + key + "'");
       }
     }
+    // Single frames are for a paused camera: while running, steps would pile up and run on
+    // after the next pause. Resuming drops the ones left.
+    if (steps > 0) {
+      if (!s.paused) throw std::string("control 'step' needs the camera paused");
+      s.step = std::min(s.step + steps, kMaxSteps);
+    }
+    if (!s.paused) s.step = 0;
     try {
       // Everything the pipeline checks against this camera (register bounds, calibration), so
       // the loop never meets a configuration it cannot build.
-      const Pipeline probe(p, info);
+      const Pipeline probe(s.pipeline, info);
     } catch (const Error& e) {
       throw std::string(e.what());
     }
   } catch (const std::string& reason) {
     return reason;
   }
+  // Any pipeline key rebuilds the pipeline at the next frame (the controller continues from the
+  // current register); pause, step, pan and recording do not.
+  s.changed = std::any_of(j.items().begin(), j.items().end(), [](const auto& item) {
+    const std::string& k = item.key();
+    return k != "paused" && k != "step" && k != "pan_deg" && k != "record" && k != "scene";
+  });
+  return "";
+}
+
+// Recordings are begun by the camera loop; a directory that cannot take one is refused here, so
+// that the page hears of it (a 400) instead of a button that says "recording".
+void ViewerServer::Impl::CheckRecordDir() const {
+  std::error_code ec;
+  std::filesystem::create_directories(options.record_dir, ec);
+  if (ec || !std::filesystem::is_directory(options.record_dir) ||
+      ::access(options.record_dir.c_str(), W_OK) != 0) {
+    throw std::string(
+        "recording: cannot write to " + options.record_dir.string() +
+        (ec ? " (" + ec.message() + ")" : std::string(" (not a writable directory)")));
+  }
+}
+
+std::string ViewerServer::Impl::Control(const std::string& body) {
+  json j;
+  try {
+    j = json::parse(body);
+  } catch (const json::exception&) {
+    return "the body is not valid JSON";
+  }
+  if (!j.is_object()) return "the body must be a JSON object of controls";
+  std::unique_lock<std::mutex> lock(control_mutex);
+  Staged s;
+  if (std::string reason = Stage(j, s); !reason.empty()) return reason;
   std::unique_ptr<Camera> reopened;
-  if (reopen) {
+  for (int attempt = 0; s.reopen; ++attempt) {
     // Opening a simulator takes a moment: not under the lock the loop takes every frame.
+    const std::string opening = s.spec;
     lock.unlock();
     try {
-      reopened = opener(spec);
+      reopened = opener(opening);
     } catch (const Error& e) {
       return std::string("scene: ") + e.what();
     }
@@ -396,22 +470,20 @@ std::string ViewerServer::Impl::Control(const std::string& body) {
       return "scene: the reopened camera has another size";
     }
     lock.lock();
+    // Staged again on what other requests committed meanwhile (they are kept).
+    if (std::string reason = Stage(j, s); !reason.empty()) return reason;
+    if (s.spec == opening) break;
+    if (attempt == 2) return "scene: other scene changes kept arriving; send it again";
   }
-  // Any pipeline key rebuilds the pipeline at the next frame (the controller continues from the
-  // current register); pause, step, pan and recording do not.
-  const bool changed = std::any_of(j.items().begin(), j.items().end(), [](const auto& item) {
-    const std::string& k = item.key();
-    return k != "paused" && k != "step" && k != "pan_deg" && k != "record" && k != "scene";
-  });
-  desired.pipeline = std::move(p);
-  if (changed) ++desired.pipeline_version;
-  desired.paused = paused;
-  desired.step = step;
-  desired.pan_rad = pan;
-  desired.record = record;
-  if (reopen) {
+  desired.pipeline = std::move(s.pipeline);
+  if (s.changed) ++desired.pipeline_version;
+  desired.paused = s.paused;
+  desired.step = s.step;
+  desired.pan_rad = s.pan;
+  desired.record = s.record;
+  if (s.reopen) {
     desired.camera = std::move(reopened);
-    desired.camera_spec = spec;
+    desired.camera_spec = s.spec;
   }
   return "";
 }
@@ -467,7 +539,10 @@ void ViewerServer::Impl::Loop() {
       reopened = std::move(desired.camera);
     }
     if (reopened) {
-      camera = std::move(reopened);
+      {
+        std::lock_guard<std::mutex> lock(camera_mutex);
+        camera = std::move(reopened);
+      }
       // A new source (e.g. the simulator with other scene parameters) starts its own clock, so
       // a recording that went on would have timestamps that decrease, which a recording may
       // not (RecordingWriter refuses them). The current file is finished and a new one begun.
@@ -629,6 +704,8 @@ void ViewerServer::Impl::Loop() {
       header["seq"] = latest_seq + 1;
       header["recording"] = recording_path;
       header["dropped"] = status.dropped;
+      header["last_error"] = status.last_error;
+      header["session"] = session;
     }
     std::string head = header.dump();
     while ((head.size() + 12) % 8 != 0) head.push_back(' ');
@@ -753,6 +830,9 @@ void ViewerServer::Impl::Routes() {
       return;
     }
     std::unique_lock<std::mutex> lock(frame_mutex);
+    // A frame number this server never sent comes from a page of an earlier server on this
+    // port: it gets the latest frame at once (whose session tells it to start over).
+    if (after > latest_seq) after = 0;
     frame_cv.wait_for(lock, std::chrono::seconds(2),
                       [&] { return latest_seq > after || stopping.load(); });
     if (latest_seq <= after || !latest) {
@@ -830,14 +910,13 @@ ViewerServer::ViewerServer(const ViewerOptions& options, const PipelineOptions& 
   d.opener = std::move(opener);
   d.camera = d.opener(options.camera_spec);
   d.info = d.camera->Info();
-  try {
-    d.camera->SetPanAngleRad(d.camera->PanAngleRad());
-    d.pan_supported = true;
-  } catch (const Error&) {
-    d.pan_supported = false;
-  }
+  // Asked, not probed: setting the current angle would succeed on sources that cannot turn
+  // (a recording repeats its angles) and would freeze a simulated pan schedule.
+  d.pan_supported = d.camera->HasPanUnit();
   d.desired.pipeline = pipeline;
   d.desired.camera_spec = options.camera_spec;
+  d.session = std::to_string(::getpid()) + "-" +
+              std::to_string(std::chrono::system_clock::now().time_since_epoch().count());
   // Validates the pipeline against the camera now, so a bad option fails before serving.
   const Pipeline probe(pipeline, d.info);
   d.rays = d.RaysBinary(probe);
@@ -876,6 +955,10 @@ bool ViewerServer::WaitFor(double seconds) {
 void ViewerServer::Stop() {
   Impl& d = *impl_;
   d.stopping = true;
+  {
+    std::lock_guard<std::mutex> lock(d.camera_mutex);
+    if (d.camera) d.camera->Interrupt();  // a ROS 2 source may be waiting up to its timeout
+  }
   d.frame_cv.notify_all();
   d.done_cv.notify_all();
   d.server.stop();

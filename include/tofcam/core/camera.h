@@ -93,6 +93,15 @@ class Camera {
   /// Pan-unit angle in radians (only for cameras on a pan unit).
   virtual void SetPanAngleRad(double angle_rad) = 0;
   [[nodiscard]] virtual double PanAngleRad() const = 0;
+  /// True when SetPanAngleRad can turn the view (a camera on a pan unit, the simulator); false
+  /// for sources that only report the angles they recorded.
+  [[nodiscard]] virtual bool HasPanUnit() const noexcept { return false; }
+
+  /// Makes a Grab() that is waiting for a live source's next frame return nullopt soon (within
+  /// about half a second), and every later Grab() too: how a program stops while the source is
+  /// silent. The one member that may be called from another thread during Grab(). Sources whose
+  /// Grab() never waits long do nothing.
+  virtual void Interrupt() noexcept {}
 };
 
 }  // namespace tofcam

@@ -54,6 +54,14 @@ struct CameraIntrinsics {
 /// model Validate() let through but Unproject() cannot invert there).
 [[noreturn]] void NoRay(double u, double v);
 
+/// Throws Error(kInvalidArgument) when the distortion folds over inside the image: along rays
+/// from the optical axis (32 directions and the corners' four) it must stay one to one out to
+/// the image's farthest corner. A renderer needs this (every pixel a ray on the lens's first
+/// branch). CameraIntrinsics::Validate does not require it: a real camera's fitted model may
+/// fold beyond its field of view (the Azure Kinect's wide mode at its unlit corners), where
+/// Unproject gives NaN rays and so no points.
+void RequireUnfoldedDistortion(const CameraIntrinsics& k);
+
 /// Unit rays of every pixel centre, structure-of-arrays for vectorised point-cloud conversion.
 /// Point (m) = radial distance (m) * (x, y, z)(row, col).
 struct RayTable {

@@ -51,7 +51,9 @@ struct ImportedSequence {
 /// (all at one integration time; the temporal σ of each pixel against its ΔL). nullopt with
 /// fewer than 3 frames, frames of different sizes, or too few pixels valid in every frame. A
 /// scene that moved inflates σ and so the scale: the accuracy filter then rejects more (fails
-/// safe). Used by the importers of multi-frame formats.
+/// safe). Uses the first frames up to 2^22 pixels in all (at least three), so that a long
+/// sequence does not need its metric copies all at once. Used by the importers of multi-frame
+/// formats.
 [[nodiscard]] std::optional<double> SelfCalibratedNoiseScale(const std::vector<Frame>& frames);
 
 /// ifm O3D303 HDF5 as written by libo3d3xx (`/o3d3xx/camera/<stream>/<N>`): streams depth (mm,
@@ -116,8 +118,9 @@ struct ImportedSequence {
 
 /// Imports by CLI spec "<format>:<path>": `ifm-o3d3xx:<file.h5>`, `adi-interleaved:<file.bin>`,
 /// `adi-raw:<depth.bin>[,<ir.bin>]` (default IR file: "depth" replaced by "ir" in the name),
-/// `azure-kinect:<dir>` (depth_640x576_u16le.bin, ir_640x576_u16le.bin, calibration.json) or
-/// `azure-kinect:<depth.bin>,<ir.bin>,<calibration.json>`, `mesa-dat:<file.dat | folder | glob>`.
+/// `azure-kinect:<dir>` (depth_<W>x<H>_u16le.bin, ir_<W>x<H>_u16le.bin, calibration.json, W x H
+/// one of the four depth modes) or `azure-kinect:<depth.bin>,<ir.bin>,<calibration.json>` (the
+/// mode from the depth file's size), `mesa-dat:<file.dat | folder | glob>`.
 /// Unknown formats are kInvalidArgument listing the known ones.
 [[nodiscard]] ImportedSequence ImportFromSpec(const std::string& spec);
 

@@ -65,6 +65,8 @@ class Ros2Camera final : public Camera {
   [[nodiscard]] int DistanceOffsetRegister() const override { return 0; }
   void SetPanAngleRad(double angle_rad) override;
   [[nodiscard]] double PanAngleRad() const override { return 0.0; }
+  /// Makes a waiting Grab() return nullopt within half a second (and every Grab() after).
+  void Interrupt() noexcept override;
 
   /// Samples skipped as malformed or unpaired so far, and the reason of the last one.
   [[nodiscard]] std::uint64_t skipped() const noexcept;

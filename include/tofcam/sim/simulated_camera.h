@@ -100,6 +100,7 @@ class SimulatedCamera final : public Camera {
   /// Any finite angle; overrides the scene's pan schedule from now on.
   void SetPanAngleRad(double angle_rad) override;
   [[nodiscard]] double PanAngleRad() const override;
+  [[nodiscard]] bool HasPanUnit() const noexcept override { return true; }
 
   [[nodiscard]] const Scene& scene() const noexcept;
   [[nodiscard]] const CameraModel& model() const noexcept;

@@ -219,7 +219,10 @@ function update3d(f) {
     if (flags[i] & reject || !isFinite(d[i])) continue;
     pos[3 * k] = d[i] * rays[i]; pos[3 * k + 1] = d[i] * rays[n + i];
     pos[3 * k + 2] = d[i] * rays[2 * n + i];
-    const t = byDl ? Math.min(1, dl[i] / 0.1) : Math.min(1, d[i] / range);
+    // Clamped to [0, 1] (NaN to 0): a kept pixel with a negative distance or no ΔL must not
+    // index outside the legend and stop the page.
+    const raw = byDl ? dl[i] / 0.1 : d[i] / range;
+    const t = raw > 0 ? Math.min(1, raw) : 0;
     const c = lut[Math.min(lut.length - 1, Math.floor(t * (lut.length - 1)))];
     col[3 * k] = c[0] / 255; col[3 * k + 1] = c[1] / 255; col[3 * k + 2] = c[2] / 255;
     ++k;
@@ -325,6 +328,14 @@ function render(f) {
       `  valid ${state.validPct.toFixed(1)} %  mean ΔL ${h.mean_delta_l_m === null ? '-' : (1000 * h.mean_delta_l_m).toFixed(1) + ' mm'}` +
       (h.rmse_m === null ? '' : `  RMSE ${(1000 * h.rmse_m).toFixed(0)} mm`) +
       `  dropped here ${state.dropped} (server ${h.dropped})` + (h.recording ? `  recording ${h.recording}` : '');
+  // The server's state, not the page's guess: a recording that failed to start or stopped on an
+  // error turns the button back, and the camera loop's last error is shown.
+  state.recording = !!h.recording;
+  $('record').textContent = state.recording ? 'stop recording' : 'start recording';
+  if (h.last_error && h.last_error !== state.serverError) {
+    state.serverError = h.last_error;
+    showError('camera loop: ' + h.last_error);
+  }
   state.last = f;
 }
 
@@ -335,6 +346,11 @@ async function loop() {
       if (r.status === 204) continue;
       if (!r.ok) { showError(`frame: HTTP ${r.status}`); await sleep(500); continue; }
       const f = parse(await r.arrayBuffer());
+      if (state.meta.session && f.header.session !== state.meta.session) {
+        // Another server on this port (a restart): its camera, rays and frame numbers are new.
+        location.reload();
+        return;
+      }
       if (state.seq && f.header.seq > state.seq + 1) state.dropped += f.header.seq - state.seq - 1;
       state.seq = f.header.seq;
       state.frames++;
@@ -402,10 +418,8 @@ function setupControls() {
     post({scene: params});
   });
   $('record').addEventListener('click', async () => {
-    if (await post({record: state.recording ? 'stop' : 'start'})) {
-      state.recording = !state.recording;
-      $('record').textContent = state.recording ? 'stop recording' : 'start recording';
-    }
+    // The button follows the frames' `recording` (render): the file is begun by the camera loop.
+    await post({record: state.recording ? 'stop' : 'start'});
   });
   for (const id of ['raw', 'filtered', 'amplitude', 'intensity', 'delta_l', 'causes_img']) {
     $(id).addEventListener('mousemove', hover);
