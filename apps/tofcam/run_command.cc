@@ -225,8 +225,9 @@ void RunRun(const RunOptions& o) {
   if (o.camera.empty()) throw Error(ErrorCode::kInvalidArgument, "--camera is required");
   if (o.out.empty()) throw Error(ErrorCode::kInvalidArgument, "--out is required");
   if (o.frames <= 0) {
-    throw Error(ErrorCode::kInvalidArgument,
-                "--frames " + std::to_string(o.frames) + " must be >= 1");
+    // 0 is also the value when --frames was not given.
+    throw Error(ErrorCode::kInvalidArgument, "--frames " + std::to_string(o.frames) +
+                                                 " must be >= 1 (--frames N is required)");
   }
   if (o.png_every < 0 || o.ply_every < 0) {
     throw Error(ErrorCode::kInvalidArgument, "--png-every and --ply-every must be >= 0");
@@ -306,7 +307,9 @@ void RunRun(const RunOptions& o) {
                  lobes.empty() ? "no lobes" : lobes.c_str(), from.scattering.c_str());
   }
   Pipeline pipeline(options, camera->Info());
-  if (controlling) {
+  if (controlling && pipeline.ControllerName().empty()) {
+    std::fprintf(stderr, "run: no exposure control (the source's integration time is fixed)\n");
+  } else if (controlling) {
     const ControllerOptions& c = pipeline.options().controller;
     char vp[64];
     if (c.gain_register_per_intensity > 0.0) {

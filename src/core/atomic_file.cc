@@ -1,5 +1,6 @@
 #include "tofcam/core/atomic_file.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -22,9 +23,17 @@ std::string Reason() { return std::strerror(errno); }
 AtomicFile::AtomicFile(std::filesystem::path path) : path_(std::move(path)) {
   temp_path_ = path_;
   temp_path_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_counter++);
-  file_ = std::fopen(temp_path_.c_str(), "wb");
+  // A new file or none: O_EXCL never follows a link someone placed at the temporary name (a
+  // shared directory such as /tmp) and never writes into a file that is already there.
+  const int fd = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd < 0) throw Error(ErrorCode::kIo, path_.string() + ": cannot create file: " + Reason());
+  file_ = ::fdopen(fd, "wb");
   if (file_ == nullptr) {
-    throw Error(ErrorCode::kIo, path_.string() + ": cannot create file: " + Reason());
+    const std::string reason = Reason();
+    ::close(fd);
+    std::error_code ec;
+    std::filesystem::remove(temp_path_, ec);
+    throw Error(ErrorCode::kIo, path_.string() + ": cannot create file: " + reason);
   }
 }
 
