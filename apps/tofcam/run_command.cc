@@ -226,8 +226,8 @@ void RunRun(const RunOptions& o) {
   if (o.out.empty()) throw Error(ErrorCode::kInvalidArgument, "--out is required");
   if (o.frames <= 0) {
     // 0 is also the value when --frames was not given.
-    throw Error(ErrorCode::kInvalidArgument, "--frames " + std::to_string(o.frames) +
-                                                 " must be >= 1 (--frames N is required)");
+    throw Error(ErrorCode::kInvalidArgument,
+                "--frames " + std::to_string(o.frames) + " must be >= 1 (--frames N is required)");
   }
   if (o.png_every < 0 || o.ply_every < 0) {
     throw Error(ErrorCode::kInvalidArgument, "--png-every and --ply-every must be >= 0");
