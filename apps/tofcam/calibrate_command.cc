@@ -371,31 +371,32 @@ void RunCalibrate(const CalibrateOptions& o) {
   // after the averaging). What does work is said now.
   {
     const int recorded = camera->IntegrationTimeRegister();
-    bool settable = true;
+    std::string refusal;  // the source's own reason, when it cannot change the register
     try {
       const int other =
           recorded > camera_info.min_integration_register ? recorded - 1 : recorded + 1;
       camera->SetIntegrationTimeRegister(other);
       camera->SetIntegrationTimeRegister(recorded);
-    } catch (const Error&) {
-      settable = false;
+    } catch (const Error& e) {
+      refusal = e.what();
     }
-    if (!settable && recorded <= 0) {
+    if (!refusal.empty() && recorded <= 0) {
+      // An import or a ROS 2 driver's stream: no register to calibrate at.
       throw Error(ErrorCode::kUnsupported,
-                  "--camera " + o.camera +
-                      " has no integration-time register (an import): a wall calibration needs "
-                      "a live, simulated or recorded camera");
+                  "--camera " + o.camera + " reports no integration-time register (" + refusal +
+                      "): a wall calibration needs a camera whose exposure it can set, or a "
+                      "recording of one");
     }
-    if (!settable &&
+    if (!refusal.empty() &&
         (wall.controller.kind != ControllerKind::kFixed ||
          o.source.integration_time_register != recorded || o.exposure_offset_frames > 0)) {
       throw Error(ErrorCode::kUnsupported,
-                  "--camera " + o.camera +
-                      " cannot change its integration time (a recording): calibrate it at its "
-                      "register with --controller fixed --integration-register " +
+                  "--camera " + o.camera + " cannot change its integration time (" + refusal +
+                      "): calibrate it at its register with --controller fixed "
+                      "--integration-register " +
                       std::to_string(recorded) +
-                      " --exposure-offset-frames 0 (and at least --warmup-max-frames + --frames "
-                      "frames in it)");
+                      " --exposure-offset-frames 0 (and frames enough for the warm-up window and "
+                      "--frames)");
     }
   }
   if (o.sweep && o.sweep_to_m >= range_m) {

@@ -309,6 +309,7 @@ void RunRun(const RunOptions& o) {
   Pipeline pipeline(options, camera->Info());
   if (controlling && pipeline.ControllerName().empty()) {
     std::fprintf(stderr, "run: no exposure control (the source's integration time is fixed)\n");
+    controlling = false;
   } else if (controlling) {
     const ControllerOptions& c = pipeline.options().controller;
     char vp[64];
@@ -377,7 +378,7 @@ void RunRun(const RunOptions& o) {
   while (done < o.frames && !g_interrupted.load()) {
     std::optional<Frame> frame = done == 0 && first ? std::move(first) : camera->Grab();
     if (!frame) {
-      end_of_stream = true;
+      end_of_stream = !g_interrupted.load();  // Ctrl-C interrupts a waiting Grab() too
       break;
     }
     if (done == 0) first_timestamp_ns = status_timestamp_ns = frame->info.timestamp_ns;

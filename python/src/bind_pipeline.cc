@@ -29,9 +29,14 @@ namespace {
 // a NumPy view of `out` may still point into. A never-filled result takes any frame.
 void CheckReusable(const Pipeline& pipeline, const Frame& frame, const PipelineResult& out) {
   const MetricFrame& m = out.frame;
-  if (m.radial_distance_m.empty()) return;
+  const bool fresh = m.radial_distance_m.empty() && m.amplitude.empty() && m.intensity.empty() &&
+                     m.delta_l_m.empty() && m.flags.empty() && m.confidence.empty() && !m.truth &&
+                     out.cloud.empty() && out.input_flags.empty() && out.filter_flags.empty();
+  if (fresh) return;
   std::string other;
-  if (m.width() != frame.width() || m.height() != frame.height()) {
+  if (m.radial_distance_m.empty()) {
+    other = "channel set (channels set by hand, no distances)";
+  } else if (m.width() != frame.width() || m.height() != frame.height()) {
     other = "size (" + std::to_string(m.width()) + "x" + std::to_string(m.height()) +
             ", the frame is " + std::to_string(frame.width()) + "x" +
             std::to_string(frame.height()) + ")";

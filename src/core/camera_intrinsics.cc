@@ -112,15 +112,13 @@ void CameraIntrinsics::Validate() const {
   if (fx_px <= 0 || fy_px <= 0) {
     throw Error(ErrorCode::kInvalidArgument, "intrinsics: focal lengths fx_px, fy_px must be > 0");
   }
-  // Every pixel must map to a ray; a lens model that cannot be inverted at the corners is
-  // as unusable as a negative focal length.
-  for (double u : {-0.5, width - 0.5}) {
-    for (double v : {-0.5, height - 0.5}) {
-      if (!Unproject({u, v}).allFinite()) {
-        throw Error(ErrorCode::kInvalidArgument,
-                    "intrinsics: distortion cannot be inverted at the image corners");
-      }
-    }
+  // A lens model must at least give the image centre a ray. Its corners need not have one: a
+  // wide-angle camera's fitted model may fold beyond its field of view (the Azure Kinect's wide
+  // mode at its unlit corners), and those pixels get NaN rays, so no points. A renderer needs
+  // every pixel: RequireUnfoldedDistortion.
+  if (!Unproject({(width - 1) / 2.0, (height - 1) / 2.0}).allFinite()) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "intrinsics: the distortion cannot be inverted at the image centre");
   }
 }
 
@@ -142,7 +140,7 @@ Eigen::Vector2d CameraIntrinsics::Undistort(const Eigen::Vector2d& d) const noex
   constexpr double kStep = 1e-7;
   for (int it = 0; it < 50; ++it) {
     const Eigen::Vector2d r = Distort(n) - d;
-    if (r.squaredNorm() < 1e-26) return n;
+    if (r.squaredNorm() < 1e-26) break;
     Eigen::Matrix2d j;
     j.col(0) = (Distort(n + Eigen::Vector2d(kStep, 0)) - Distort(n - Eigen::Vector2d(kStep, 0))) /
                (2 * kStep);
@@ -152,9 +150,22 @@ Eigen::Vector2d CameraIntrinsics::Undistort(const Eigen::Vector2d& d) const noex
     if (!std::isfinite(det) || std::abs(det) < 1e-12) break;
     n -= j.inverse() * r;
   }
-  if ((Distort(n) - d).squaredNorm() < 1e-20) return n;
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  return {nan, nan};
+  if (!((Distort(n) - d).squaredNorm() < 1e-20)) return {nan, nan};
+  // A root beyond the lens's first fold (where the model, fitted inside the field of view,
+  // turns back and rises again) is a direction the camera does not see: no ray, not a wrong
+  // one. The first branch keeps a positive Jacobian from the axis out to the root; eight
+  // samples along the way find a fold region wider than an eighth of the radius.
+  for (int k = 1; k <= 8; ++k) {
+    const Eigen::Vector2d m = n * (k / 8.0);
+    Eigen::Matrix2d j;
+    j.col(0) = (Distort(m + Eigen::Vector2d(kStep, 0)) - Distort(m - Eigen::Vector2d(kStep, 0))) /
+               (2 * kStep);
+    j.col(1) = (Distort(m + Eigen::Vector2d(0, kStep)) - Distort(m - Eigen::Vector2d(0, kStep))) /
+               (2 * kStep);
+    if (!(j.determinant() > 0.0)) return {nan, nan};
+  }
+  return n;
 }
 
 Eigen::Vector2d CameraIntrinsics::Project(const Eigen::Vector3d& p) const noexcept {

@@ -236,10 +236,14 @@ RecordingWriter::RecordingWriter(const std::filesystem::path& path, const Camera
                     " per side; the camera's are " + std::to_string(cam_w) + " x " +
                     std::to_string(cam_h));
   }
-  if (camera.model.size() + 1 > io_internal::kMaxStringAttributeBytes) {
-    throw Error(ErrorCode::kInvalidArgument, path.string() + ": the camera model's name is " +
+  if (camera.model.size() + 1 > io_internal::kMaxStringAttributeBytes ||
+      options.calibration_id.size() + 1 > io_internal::kMaxStringAttributeBytes) {
+    // Checked before the file is created (H5F_ACC_TRUNC would empty an existing one).
+    throw Error(ErrorCode::kInvalidArgument, path.string() + ": the camera model's name (" +
                                                  std::to_string(camera.model.size()) +
-                                                 " bytes, more than a recording holds");
+                                                 " bytes) or the calibration id (" +
+                                                 std::to_string(options.calibration_id.size()) +
+                                                 " bytes) is longer than a recording holds");
   }
   if (!(camera.modulation_frequency_hz > 0) || !std::isfinite(camera.modulation_frequency_hz)) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -328,6 +332,17 @@ void RecordingWriter::Append(const Frame& frame) {
   // ValidateFrame checked every channel's size; a recording also needs the truth's σ.
   if (frame.truth && frame.truth->sigma_m.empty()) {
     throw Error(ErrorCode::kMismatch, m.path.string() + ": ground truth without sigma_m");
+  }
+  // The first frame's strings become attributes: too long for the reader, refused before any
+  // dataset exists (a half-made file would fail every later Append).
+  if (m.count == 0 &&
+      (frame.info.camera_model.size() + 1 > io_internal::kMaxStringAttributeBytes ||
+       frame.info.confidence_source.size() + 1 > io_internal::kMaxStringAttributeBytes)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                m.path.string() +
+                    ": the frame's camera_model or confidence_source is longer than " +
+                    std::to_string(io_internal::kMaxStringAttributeBytes - 1) +
+                    " bytes, more than a recording holds");
   }
   Hdf5Silencer silence;
   if (m.count == 0) m.CreateDatasets(frame);

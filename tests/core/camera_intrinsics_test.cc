@@ -142,8 +142,11 @@ TEST(CameraIntrinsicsTest, ALensThatFoldsOverInsideTheImageIsFound) {
     EXPECT_EQ(e.code(), ErrorCode::kInvalidArgument);
     EXPECT_NE(std::string(e.what()).find("folds over"), std::string::npos) << e.what();
   }
-  // A real camera's fitted model may fold where nothing is imaged: valid, with NaN rays there.
+  // A real camera's fitted model may fold where nothing is imaged: valid, with NaN rays there
+  // (a root on the far branch, at r = 3.55, used to come back as a ray 74 degrees off the axis).
   EXPECT_NO_THROW(k.Validate());
+  EXPECT_TRUE(k.Unproject({79.5, 61.5}).allFinite());
+  EXPECT_FALSE(k.Unproject({-0.5, -0.5}).allFinite());
   k.fx_px = k.fy_px = 200.0;
   EXPECT_NO_THROW(RequireUnfoldedDistortion(k));
   const RayTable t = MakeRayTable(k);

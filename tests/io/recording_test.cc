@@ -388,6 +388,24 @@ TEST_F(RecordingTest, WriterRefusesWhatTheReaderWouldRefuse) {
   EXPECT_THROW(RecordingWriter(dir_ / "named.h5", named), Error);
   EXPECT_FALSE(std::filesystem::exists(dir_ / "big.h5"));
   EXPECT_FALSE(std::filesystem::exists(dir_ / "named.h5"));
+  // A calibration id too long: refused before the file is created, so a file already at the
+  // path keeps its content.
+  { std::ofstream(dir_ / "kept.h5") << "earlier content"; }
+  RecordingOptions long_id;
+  long_id.calibration_id = std::string(70000, 'c');
+  EXPECT_THROW(RecordingWriter(dir_ / "kept.h5", SmallCamera(), long_id), Error);
+  EXPECT_EQ(std::filesystem::file_size(dir_ / "kept.h5"), 15u);
+  // A first frame whose strings are too long: refused before any dataset exists, so the next
+  // frame still starts the recording.
+  std::mt19937 rng(3);
+  const CameraInfo cam = SmallCamera();
+  RecordingWriter writer(dir_ / "first.h5", cam);
+  Frame odd = MakeFrame(cam, 0, true, false, rng);
+  odd.info.confidence_source = std::string(70000, 's');
+  EXPECT_THROW(writer.Append(odd), Error);
+  writer.Append(MakeFrame(cam, 0, true, false, rng));
+  writer.Close();
+  EXPECT_EQ(RecordingReader(dir_ / "first.h5").frame_count(), 1u);
 }
 
 TEST_F(RecordingTest, MissingAndNonHdf5FilesAreErrors) {

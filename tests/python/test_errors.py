@@ -44,7 +44,7 @@ def test_messages_with_bytes_that_are_not_utf8_stay_tofcam_errors(tmp_path):
     garbage.write_bytes(bytes(range(128, 256)) * 4)
     with pytest.raises(tofcam.Error) as info:
         tofcam.load_calibration(garbage)
-    assert isinstance(str(info.value), str)
+    assert "random.bin" in str(info.value)
     missing = tmp_path / os.fsdecode(b"\xff.h5")
     with pytest.raises(tofcam.NotFoundError) as info:
         tofcam.RecordingReader(missing)

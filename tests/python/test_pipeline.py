@@ -164,6 +164,13 @@ def test_out_of_another_layout_is_refused_not_freed_under_its_views():
         small.info, {"accuracy": {"enabled": False}, "filters": {"accuracy": {"enabled": False}}})
     with pytest.raises(tofcam.MismatchError, match="ΔL"):
         without_accuracy.process(small.grab(), out=res)
+    # Channels set by hand on an empty result, then a view of one: refused as well.
+    handmade = tofcam.PipelineResult()
+    handmade.frame.intensity = np.ones((124, 160), np.float32)
+    held = handmade.frame.intensity
+    with pytest.raises(tofcam.MismatchError, match="by hand"):
+        tofcam.Pipeline(small.info).process(small.grab(), out=handmade)
+    assert held[0, 0] == 1.0
     assert np.array_equal(view, kept)  # nothing was written through the refused calls
     tofcam.Pipeline(small.info).process(small.grab(), out=res)  # same layout: in place
     assert np.shares_memory(view, res.frame.radial_distance_m)

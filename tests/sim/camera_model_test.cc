@@ -74,11 +74,18 @@ TEST(CameraModelTest, ErrorsNameSourceLineAndField) {
   }
   // A name the recording could not store, and a sensor larger than a recording holds (the
   // simulator used to write such files, which the reader then refused).
-  EXPECT_THROW((void)ParseCameraModel("name: " + std::string(300, 'x') + "\n", "m.yaml"), Error);
-  EXPECT_THROW((void)ParseCameraModel("intrinsics: {width: 4096, height: 1025, fx_px: 3000, "
-                                      "fy_px: 3000}\n",
-                                      "m.yaml"),
-               Error);
+  const auto message = [](const std::string& yaml) {
+    try {
+      (void)ParseCameraModel(yaml, "m.yaml");
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("(accepted)");
+  };
+  EXPECT_NE(message("name: " + std::string(300, 'x') + "\n").find("bytes"), std::string::npos);
+  EXPECT_NE(
+      message("intrinsics: {width: 4096, height: 1025, fx_px: 3000, fy_px: 3000}\n").find("pixels"),
+      std::string::npos);
   EXPECT_NO_THROW((void)ParseCameraModel(
       "intrinsics: {width: 2048, height: 2048, fx_px: 1500, fy_px: 1500}\n", "m.yaml"));
   try {
@@ -90,9 +97,8 @@ TEST(CameraModelTest, ErrorsNameSourceLineAndField) {
   }
   // A lens that folds over inside the image (tests/core/camera_intrinsics_test.cc derives the
   // fold): the simulator cannot give those pixels a ray (Embree aborted on the NaN rays).
-  EXPECT_THROW(
-      (void)ParseCameraModel("intrinsics: {fx_px: 80, fy_px: 80, k1: -0.3, k2: 0.02}\n", "m.yaml"),
-      Error);
+  EXPECT_NE(message("intrinsics: {fx_px: 80, fy_px: 80, k1: -0.3, k2: 0.02}\n").find("folds over"),
+            std::string::npos);
   EXPECT_THROW((void)ParseCameraModel("tap_duty: abc\n", "m.yaml"), Error);
   EXPECT_THROW((void)ParseCameraModel("default_integration_register: 300\n", "m.yaml"), Error);
   EXPECT_THROW(

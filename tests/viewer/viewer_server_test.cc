@@ -283,8 +283,6 @@ TEST_F(ViewerServerTest, StepsNeedAPauseAndRefusalsAreImmediate) {
   { std::ofstream(record_dir_) << "a file, not a directory"; }
   EXPECT_EQ(Post(R"({"record": "start"})", &reply), 400);
   EXPECT_NE(reply.find("recording"), std::string::npos) << reply;
-  ASSERT_TRUE(WaitFrames(2));
-  EXPECT_TRUE(server_->Status().recording.empty());
 }
 
 // A camera without a pan unit (a stand-in for a recording or a ROS 2 source, which report

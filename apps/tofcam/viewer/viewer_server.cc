@@ -434,9 +434,9 @@ std::string ViewerServer::Impl::Stage(const json& j, Staged& s) const {
 // Recordings are begun by the camera loop; a directory that cannot take one is refused here, so
 // that the page hears of it (a 400) instead of a button that says "recording".
 void ViewerServer::Impl::CheckRecordDir() const {
-  std::error_code ec;
+  std::error_code ec, is_dir_ec;  // the throwing overloads would turn the 400 into a 500
   std::filesystem::create_directories(options.record_dir, ec);
-  if (ec || !std::filesystem::is_directory(options.record_dir) ||
+  if (ec || !std::filesystem::is_directory(options.record_dir, is_dir_ec) ||
       ::access(options.record_dir.c_str(), W_OK) != 0) {
     throw std::string(
         "recording: cannot write to " + options.record_dir.string() +
@@ -515,6 +515,7 @@ void ViewerServer::Impl::Loop() {
         } catch (const std::exception& e) {
           std::lock_guard<std::mutex> frame_lock(frame_mutex);
           status.last_error = std::string("pipeline: ") + e.what();
+          ++status.errors;
         }
         if (!pipeline) {
           std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -554,6 +555,7 @@ void ViewerServer::Impl::Loop() {
       } catch (const Error& e) {
         std::lock_guard<std::mutex> lock(frame_mutex);
         status.last_error = e.what();
+        ++status.errors;
       }
     }
     // record: 1 start, -1 stop, 2 finish the current file and start the next.
@@ -563,6 +565,7 @@ void ViewerServer::Impl::Loop() {
       } catch (const Error& e) {
         std::lock_guard<std::mutex> lock(frame_mutex);
         status.last_error = std::string("recording: ") + e.what();
+        ++status.errors;
       }
       recorder.reset();
       recording_path.clear();
@@ -582,6 +585,7 @@ void ViewerServer::Impl::Loop() {
       } catch (const std::exception& e) {
         std::lock_guard<std::mutex> lock(frame_mutex);
         status.last_error = std::string("recording: ") + e.what();
+        ++status.errors;
         recording_path.clear();
       }
     }
@@ -611,6 +615,7 @@ void ViewerServer::Impl::Loop() {
     } catch (const Error& e) {
       std::lock_guard<std::mutex> lock(frame_mutex);
       status.last_error = e.what();
+      ++status.errors;
       frame.reset();
     }
     if (!frame) {
@@ -632,6 +637,7 @@ void ViewerServer::Impl::Loop() {
       // skipped; the server keeps serving the last good frame.
       std::lock_guard<std::mutex> lock(frame_mutex);
       status.last_error = e.what();
+      ++status.errors;
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
       continue;
     }
@@ -641,6 +647,7 @@ void ViewerServer::Impl::Loop() {
       } catch (const std::exception& e) {
         std::lock_guard<std::mutex> lock(frame_mutex);
         status.last_error = std::string("recording: ") + e.what();
+        ++status.errors;
         recorder.reset();
         recording_path.clear();
       }
@@ -705,6 +712,7 @@ void ViewerServer::Impl::Loop() {
       header["recording"] = recording_path;
       header["dropped"] = status.dropped;
       header["last_error"] = status.last_error;
+      header["errors"] = status.errors;
       header["session"] = session;
     }
     std::string head = header.dump();
@@ -804,7 +812,8 @@ void ViewerServer::Impl::Routes() {
               {"ended", s.ended},
               {"controller", s.controller},
               {"recording", s.recording},
-              {"last_error", s.last_error}};
+              {"last_error", s.last_error},
+              {"errors", s.errors}};
     res.set_content(j.dump(), "application/json");
     res.set_header("Cache-Control", "no-store");
   });

@@ -52,6 +52,7 @@ struct ViewerStatus {
   std::string controller;  ///< "" when off.
   std::string recording;   ///< Path being recorded, "" when not.
   std::string last_error;  ///< Last error of the camera loop (e.g. a failed recording).
+  long long errors = 0;    ///< Errors of the camera loop so far (last_error is the newest).
 };
 
 class ViewerServer {

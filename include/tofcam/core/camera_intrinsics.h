@@ -30,7 +30,9 @@ struct CameraIntrinsics {
   /// published).
   [[nodiscard]] static CameraIntrinsics SwissRangerSr2();
 
-  /// Throws Error(kInvalidArgument) naming the field when a value is out of range or not finite.
+  /// Throws Error(kInvalidArgument) naming the field when a value is out of range or not
+  /// finite, or when the image centre has no ray. Pixels beyond a folding lens's first branch
+  /// are allowed (they have NaN rays); see RequireUnfoldedDistortion.
   void Validate() const;
 
   [[nodiscard]] bool HasDistortion() const noexcept;
@@ -40,7 +42,9 @@ struct CameraIntrinsics {
   /// Distorted normalised coordinates (x/z, y/z after distortion) of undistorted ones.
   [[nodiscard]] Eigen::Vector2d Distort(const Eigen::Vector2d& normalized) const noexcept;
   /// Inverse of Distort by Newton iteration (converges to < 1e-12 for any realistic lens);
-  /// returns NaNs if it does not converge.
+  /// returns NaNs if it does not converge, or if the root lies beyond the lens's first fold
+  /// (the Jacobian turns non-positive on the way out from the axis: a direction a model fitted
+  /// within the field of view does not describe).
   [[nodiscard]] Eigen::Vector2d Undistort(const Eigen::Vector2d& distorted) const noexcept;
   /// Unit-length ray (z > 0) through pixel coordinates `pixel`.
   [[nodiscard]] Eigen::Vector3d Unproject(const Eigen::Vector2d& pixel) const noexcept;

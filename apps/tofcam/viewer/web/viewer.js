@@ -32,6 +32,38 @@ function showError(text) {
   $('error').textContent = text;
 }
 
+// The server's recording state, not the page's guess: a recording that failed to start or
+// stopped on an error turns the button back.
+function showRecording(path) {
+  state.recording = !!path;
+  $('record').textContent = state.recording ? 'stop recording' : 'start recording';
+}
+
+// The camera loop's errors: shown when the count grows, so an error from before the page was
+// opened is not shown again.
+function showLoopErrors(count, text) {
+  if (count === undefined) return;
+  if (state.loopErrors === undefined) state.loopErrors = count;
+  if (count > state.loopErrors && text) showError('camera loop: ' + text);
+  state.loopErrors = count;
+}
+
+// After a recording request: the loop begins or ends the file at its next step, also while
+// paused (when no frame comes to tell the page), so /status is asked until it shows.
+async function followRecording(wanted) {
+  for (let k = 0; k < 20; ++k) {
+    await sleep(100);
+    try {
+      const s = await (await fetch('/status', {cache: 'no-store'})).json();
+      showRecording(s.recording);
+      showLoopErrors(s.errors, s.last_error);
+      if (state.recording === wanted) return;
+    } catch (e) {
+      return;
+    }
+  }
+}
+
 async function post(controls) {
   try {
     const r = await fetch('/control', {
@@ -330,12 +362,8 @@ function render(f) {
       `  dropped here ${state.dropped} (server ${h.dropped})` + (h.recording ? `  recording ${h.recording}` : '');
   // The server's state, not the page's guess: a recording that failed to start or stopped on an
   // error turns the button back, and the camera loop's last error is shown.
-  state.recording = !!h.recording;
-  $('record').textContent = state.recording ? 'stop recording' : 'start recording';
-  if (h.last_error && h.last_error !== state.serverError) {
-    state.serverError = h.last_error;
-    showError('camera loop: ' + h.last_error);
-  }
+  showRecording(h.recording);
+  showLoopErrors(h.errors, h.last_error);
   state.last = f;
 }
 
@@ -418,8 +446,10 @@ function setupControls() {
     post({scene: params});
   });
   $('record').addEventListener('click', async () => {
-    // The button follows the frames' `recording` (render): the file is begun by the camera loop.
-    await post({record: state.recording ? 'stop' : 'start'});
+    // The button follows the server (frames' and /status's `recording`): the camera loop
+    // begins and ends the file.
+    const wanted = !state.recording;
+    if (await post({record: wanted ? 'start' : 'stop'})) await followRecording(wanted);
   });
   for (const id of ['raw', 'filtered', 'amplitude', 'intensity', 'delta_l', 'causes_img']) {
     $(id).addEventListener('mousemove', hover);
