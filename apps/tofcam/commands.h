@@ -19,6 +19,14 @@ std::map<std::string, CommandSetup>& CommandRegistry();
 /// Registers a subcommand; returns true so it can initialise a namespace-scope constant.
 bool RegisterCommand(const std::string& name, CommandSetup setup);
 
+/// For unsigned options (seeds): CLI11 reads "-1" into an unsigned field as 2^64 - 1.
+inline const CLI::Validator kNonNegative(
+    [](std::string& input) {
+      return input.find('-') == std::string::npos ? std::string()
+                                                  : "'" + input + "' must not be negative";
+    },
+    "UINT");
+
 /// `--ros2-domain N` (0..232) for a command that opens camera sources: the DDS domain of a
 /// `ros2:` source whose spec names none (`?domain=`), default 0. Every command with --camera
 /// takes it, as the sources' help line says.

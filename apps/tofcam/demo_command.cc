@@ -633,7 +633,9 @@ void SetupDemoCommand(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
       "demo", "The paper's system on the simulated SR-2: calibrate, run, pan (make demo)");
   sub->add_option("--out", o->out, "Output directory")->capture_default_str();
-  sub->add_option("--seed", o->seed, "Simulator noise seed")->capture_default_str();
+  sub->add_option("--seed", o->seed, "Simulator noise seed")
+      ->check(kNonNegative)
+      ->capture_default_str();
   sub->add_option("--duration-s", o->duration_s,
                   "Camera time of the demo sequence, s (0 = the scene's 10 s)")
       ->capture_default_str();

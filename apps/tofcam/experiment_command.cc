@@ -73,7 +73,9 @@ void SetupExperimentCommand(CLI::App& app) {
   for (const std::string& n : experiments::ExperimentNames()) names += "|" + n;
   sub->add_option("name", opts->name, names)->required();
   sub->add_option("--out", opts->out, "Output folder")->capture_default_str();
-  sub->add_option("--seed", opts->run.seed, "Simulator seed")->capture_default_str();
+  sub->add_option("--seed", opts->run.seed, "Simulator seed")
+      ->check(kNonNegative)
+      ->capture_default_str();
   sub->add_option("--threads", opts->run.threads, "Simulator threads, 1..64")
       ->capture_default_str();
   sub->add_option("--effort", opts->run.effort,

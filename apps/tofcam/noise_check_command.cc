@@ -272,7 +272,9 @@ void SetupNoiseCheckCommand(CLI::App& app) {
   sub->add_option("--integration-register", o->source.integration_time_register,
                   "Integration-time register to open the camera with (0 = its default)")
       ->capture_default_str();
-  sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  sub->add_option("--seed", o->source.seed, "Simulator noise seed")
+      ->check(kNonNegative)
+      ->capture_default_str();
   AddRos2DomainOption(sub, o->source.ros2_domain);
   sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
   sub->callback([o] { RunNoiseCheck(*o); });

@@ -79,7 +79,9 @@ void SetupRecordCommand(CLI::App& app) {
   sub->add_option("--progress-every", o->progress_every,
                   "Report progress every N frames, after the frame is on disk (0 = every second)")
       ->capture_default_str();
-  sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  sub->add_option("--seed", o->source.seed, "Simulator noise seed")
+      ->check(kNonNegative)
+      ->capture_default_str();
   AddRos2DomainOption(sub, o->source.ros2_domain);
   sub->add_flag("--real-time", o->source.real_time, "Throttle the source to its frame rate");
   sub->add_flag("--loop", o->source.loop, "Loop finite sources (playback, imports)");

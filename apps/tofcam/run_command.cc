@@ -535,7 +535,9 @@ void SetupRunCommand(CLI::App& app) {
   sub->add_option("--ply-every", o->ply_every,
                   "Write the point cloud (valid points, binary PLY) of every K-th frame; 0 = none")
       ->capture_default_str();
-  sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  sub->add_option("--seed", o->source.seed, "Simulator noise seed")
+      ->check(kNonNegative)
+      ->capture_default_str();
   sub->add_option("--camera-model", o->source.camera_model, "Simulator camera model");
   sub->add_flag("--real-time", o->source.real_time, "Throttle to the camera's frame rate");
   sub->add_flag("--loop", o->source.loop, "Loop finite sources (playback, imports)");

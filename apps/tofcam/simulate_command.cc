@@ -157,7 +157,7 @@ void SetupSimulateCommand(CLI::App& app) {
   sub->add_option("--integration-time-us", o->integration_time_us,
                   "Integration time in us (rounded to a register step); 0 = model default")
       ->capture_default_str();
-  sub->add_option("--seed", o->seed, "Noise seed")->capture_default_str();
+  sub->add_option("--seed", o->seed, "Noise seed")->check(kNonNegative)->capture_default_str();
   sub->add_option("--out", o->out, "Output: .h5 recording, or a directory with --format png")
       ->required();
   sub->add_option("--format", o->format, "h5 (recording) or png (per-frame files)")

@@ -106,7 +106,9 @@ void SetupViewCommand(CLI::App& app) {
   sub->add_flag("--loop", o->source.loop, "Playback: start again at the end of the recording");
   sub->add_flag("--no-real-time", o->no_real_time,
                 "Run the simulator or a playback as fast as possible instead of at camera rate");
-  sub->add_option("--seed", o->source.seed, "Simulator noise seed")->capture_default_str();
+  sub->add_option("--seed", o->source.seed, "Simulator noise seed")
+      ->check(kNonNegative)
+      ->capture_default_str();
   AddRos2DomainOption(sub, o->source.ros2_domain);
   sub->add_option("--camera-model", o->source.camera_model,
                   "Simulator camera model (name or YAML file)");

@@ -1003,6 +1003,15 @@ TEST_F(RunCommandTest, BadOptionsFailWithClearErrors) {
   EXPECT_EQ(Run("simulate --scene wall --frames 1 --pan-deg nan --out " + (dir_ / "f.h5").string()),
             invalid);
   EXPECT_NE(Stderr().find("pan angle"), std::string::npos) << Stderr();
+  // An unsigned seed: "-1" used to wrap to 2^64 - 1 (CLI11 reads it into the unsigned field).
+  EXPECT_NE(Run("simulate --scene wall --frames 1 --seed -1 --out " + (dir_ / "s.h5").string()), 0);
+  EXPECT_NE(Stderr().find("must not be negative"), std::string::npos) << Stderr();
+  EXPECT_FALSE(fs::exists(dir_ / "s.h5"));
+  // A DDS domain outside ROS 2's 0..232.
+  EXPECT_NE(Run("record --camera sim:wall --frames 1 --ros2-domain 999 --out " +
+                (dir_ / "r.h5").string()),
+            0);
+  EXPECT_NE(Stderr().find("--ros2-domain"), std::string::npos) << Stderr();
   // Export: a count below -1, and "all frames" of a source that never ends (it used to write
   // files until the disk was full).
   EXPECT_EQ(Run("export --camera sim:wall --count -5 --format csv --out " + (dir_ / "g").string()),
