@@ -294,8 +294,12 @@ nlohmann::json ReportControllerResponse(const std::vector<ControlPoint>& trace,
       clipped.push_back(p.clipped_fraction);
     }
     const double r = median(reg), i = median(intensity), k = median(clipped);
-    std::printf(" %s: register %.0f, mean intensity %.0f, clipped %.1f%%;", phase.name, r, i,
-                k * 100);
+    if (reg.empty()) {
+      std::printf(" %s: not reached (--frames);", phase.name);  // a short run
+    } else {
+      std::printf(" %s: register %.0f, mean intensity %.0f, clipped %.1f%%;", phase.name, r, i,
+                  k * 100);
+    }
     out.push_back({{"phase", phase.name},
                    {"from_s", phase.from_s},
                    {"to_s", phase.to_s},
@@ -597,14 +601,25 @@ void RunDemo(const DemoOptions& o) {
   WriteFileAtomically(out / "summary.json", summary.dump(2) + "\n");
 
   std::printf("\ndone in %.1f s. Look at %s/:\n", Seconds(start), o.out.c_str());
+  if (fs::exists(out / "moment_before_raw.png")) {
+    std::printf(
+        "  moment_before_raw.png next to moment_before_filtered.png: the accuracy filter keeps "
+        "the well-lit near objects and removes the noisy far hall (its dL is large)\n");
+  }
+  if (fs::exists(out / "moment_hand_raw.png")) {
+    std::printf(
+        "  moment_hand_*.png: the clipped hand has no phase (black in both); the filter removes "
+        "the far hall, part of the scattering halo around the fingers survives (docs/demo.md)\n");
+  }
+  if (moments.empty()) {
+    std::printf("  (no moment_* files: --frames ended the run before the first moment)\n");
+  } else {
+    std::printf(
+        "  moment_{before,hand,lamps}_{raw,filtered}.png  false colour, yellow 0 m -> red -> "
+        "magenta -> blue L = 7.5 m, black = rejected (the moments the run reached)\n"
+        "  moment_*.ply     the kept points of those frames (camera frame)\n");
+  }
   std::printf(
-      "  moment_before_raw.png next to moment_before_filtered.png: the accuracy filter keeps the "
-      "well-lit near objects and removes the noisy far hall (its dL is large)\n"
-      "  moment_hand_*.png: the clipped hand has no phase (black in both); the filter removes "
-      "the far hall, part of the scattering halo around the fingers survives (docs/demo.md)\n"
-      "  moment_{before,hand,lamps}_{raw,filtered}.png  false colour, yellow 0 m -> red -> "
-      "magenta -> blue L = 7.5 m, black = rejected\n"
-      "  moment_*.ply     the kept points of those frames (camera frame)\n"
       "  panorama_{raw,filtered}.png  the 180 deg strip, left = +90 deg; .ply: its cloud (pan "
       "unit's base frame)\n"
       "  frames.csv       one row per frame (register, intensity, valid, dL, RMSE, bad removed, "

@@ -21,12 +21,19 @@ std::string Reason() { return std::strerror(errno); }
 }  // namespace
 
 AtomicFile::AtomicFile(std::filesystem::path path) : path_(std::move(path)) {
-  temp_path_ = path_;
-  temp_path_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_counter++);
   // A new file or none: O_EXCL never follows a link someone placed at the temporary name (a
-  // shared directory such as /tmp) and never writes into a file that is already there.
-  const int fd = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-  if (fd < 0) throw Error(ErrorCode::kIo, path_.string() + ": cannot create file: " + Reason());
+  // shared directory such as /tmp) and never writes into a file that is already there. A name
+  // that exists (a link, or the leftover of a killed run whose pid this one reuses, as in a
+  // container) is passed over for the next.
+  int fd = -1;
+  for (int attempt = 0; fd < 0; ++attempt) {
+    temp_path_ = path_;
+    temp_path_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_counter++);
+    fd = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd < 0 && (errno != EEXIST || attempt == 999)) {
+      throw Error(ErrorCode::kIo, path_.string() + ": cannot create file: " + Reason());
+    }
+  }
   file_ = ::fdopen(fd, "wb");
   if (file_ == nullptr) {
     const std::string reason = Reason();

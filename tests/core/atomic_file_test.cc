@@ -39,6 +39,26 @@ TEST(AtomicFileTest, UncommittedWriteLeavesOldFileAndNoTemporary) {
   EXPECT_EQ(entries, 1);
 }
 
+// Links at the temporary names (someone else's, in a shared directory such as /tmp, or a
+// killed run's leftovers under a reused pid) are never followed and never block the write: the
+// file goes to a free name, the link's target keeps its content.
+TEST(AtomicFileTest, NeverFollowsALinkAtTheTemporaryName) {
+  const fs::path dir = TempDir() / "links";
+  fs::create_directories(dir);
+  const fs::path victim = dir / "victim.txt";
+  WriteFileAtomically(victim, "victim");
+  const fs::path p = dir / "c.txt";
+  // This process's next temporary names (pid and a counter from 0; few are used before here).
+  for (int k = 0; k < 200; ++k) {
+    fs::create_symlink(victim,
+                       p.string() + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(k));
+  }
+  WriteFileAtomically(p, "new");
+  EXPECT_EQ(ReadFile(p), "new");
+  EXPECT_FALSE(fs::is_symlink(p));
+  EXPECT_EQ(ReadFile(victim), "victim");
+}
+
 TEST(AtomicFileTest, ErrorsNameThePath) {
   try {
     (void)ReadFile("/nonexistent/tofcam/file.yaml");
