@@ -61,6 +61,13 @@ void BindRecordings(py::module_& m) {
       .def("__enter__", [](py::object self) { return self; })
       .def("__exit__", [](RecordingWriter& w, py::args) { w.Close(); });
 
+  // A Python index (negative counts from the end) as a frame number; IndexError outside.
+  static const auto FrameIndex = [](const RecordingReader& r, std::int64_t index) {
+    const auto n = static_cast<std::int64_t>(r.frame_count());
+    if (index < 0) index += n;
+    if (index < 0 || index >= n) throw py::index_error("frame index out of range");
+    return static_cast<std::size_t>(index);
+  };
   py::class_<RecordingReader, std::shared_ptr<RecordingReader>>(
       m, "RecordingReader",
       "Random access to a recording's frames: len(), reader[i] (negative indices count from "
@@ -70,13 +77,11 @@ void BindRecordings(py::module_& m) {
       .def(
           "__getitem__",
           [](const RecordingReader& r, std::int64_t index) {
-            const auto n = static_cast<std::int64_t>(r.frame_count());
-            if (index < 0) index += n;
-            if (index < 0 || index >= n) throw py::index_error("frame index out of range");
+            const std::size_t at = FrameIndex(r, index);
             Frame f;
             {
               py::gil_scoped_release release;
-              f = r.Read(static_cast<std::size_t>(index));
+              f = r.Read(at);
             }
             return std::make_shared<Frame>(std::move(f));
           },
@@ -91,10 +96,7 @@ void BindRecordings(py::module_& m) {
       .def(
           "info",
           [](const RecordingReader& r, std::int64_t index) {
-            const auto n = static_cast<std::int64_t>(r.frame_count());
-            if (index < 0) index += n;
-            if (index < 0 || index >= n) throw py::index_error("frame index out of range");
-            return r.Info(static_cast<std::size_t>(index));  // a copy
+            return r.Info(FrameIndex(r, index));  // a copy
           },
           py::arg("index"),
           "FrameInfo of frame `index` without reading its images (a copy; negative indices "
