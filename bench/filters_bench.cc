@@ -10,6 +10,7 @@
 #include "tofcam/filters/denoise.h"
 #include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/frame_pair.h"
+#include "tofcam/filters/neighbour_prediction.h"
 #include "tofcam/filters/spatial_filter.h"
 #include "tofcam/filters/uncertainty.h"
 
@@ -172,6 +173,20 @@ void BM_DenoisePlane(benchmark::State& state) {
   tofcam::bench::SetPixels(state);
 }
 BENCHMARK(BM_DenoisePlane)->Apply(Resolutions);
+
+// The neighbours' prediction (tofcam/filters/neighbour_prediction.h), its defaults (7x7), into
+// reused images.
+void BM_NeighbourPrediction(benchmark::State& state) {
+  const tofcam::bench::SimulatedInput& in = tofcam::bench::Input(state);
+  tofcam::NeighbourPrediction out;
+  std::size_t i = 0;
+  for (auto _ : state) {
+    tofcam::PredictFromNeighboursInto(in.ready[i++ % in.ready.size()], {}, out);
+    benchmark::DoNotOptimize(out.distance_m.data());
+  }
+  tofcam::bench::SetPixels(state);
+}
+BENCHMARK(BM_NeighbourPrediction)->Apply(Resolutions);
 
 // Into a reused image, as a per-frame loop (and Pipeline) runs it.
 void BM_Uncertainty(benchmark::State& state) {

@@ -40,6 +40,7 @@
 #include "tofcam/filters/denoise.h"
 #include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/frame_pair.h"
+#include "tofcam/filters/neighbour_prediction.h"
 #include "tofcam/filters/spatial_filter.h"
 #include "tofcam/filters/temporal_filter.h"
 #include "tofcam/filters/uncertainty.h"
@@ -185,9 +186,11 @@ struct Workspace {
   Image<PixelFlags> raised;
   // One prepared filter set per filter row (key: the row's filter name), built for the rays.
   std::map<std::string, FilterSet> filter_sets;
-  PanView pan_view;           // reused (MakePanViewInto), as a per-sweep loop does
-  Image<float> smoothed;      // SpatialFilterInto output
-  DenoisedChannels denoised;  // DenoiseInto output
+  PanView pan_view;                // reused (MakePanViewInto), as a per-sweep loop does
+  Image<float> smoothed;           // SpatialFilterInto output
+  DenoisedChannels denoised;       // DenoiseInto output
+  NeighbourPrediction prediction;  // PredictFromNeighboursInto output
+  std::vector<NeighbourPrediction> predictions;  // one per ready frame, for the uncertainty row
   MetricFrame temporal_frame;
   std::optional<TemporalFilter> temporal;
   PointCloud cloud;
@@ -231,6 +234,7 @@ void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
   ws.frames = in.frames;
   ws.camera_frames = in.camera_frames;
   ws.ready = in.ready;
+  for (const MetricFrame& f : ws.ready) ws.predictions.push_back(PredictFromNeighbours(f));
   ws.calibrate = in.ready;
   for (int k = 0; k < 5; ++k) {
     MetricFrame f = in.ready[static_cast<std::size_t>(k) % in.ready.size()];
@@ -439,6 +443,13 @@ std::vector<Stage> MakeStages() {
                  DenoiseInto(ws.ready[i % ws.ready.size()], ws.input->rays, o, ws.denoised);
                  Sink(ws, ws.denoised.radial_distance_m.data());
                }});
+  // The neighbours' prediction (not in the paper): distance, ΔL and flags in, the prediction
+  // and its σ out.
+  s.push_back(
+      {"neighbour prediction 7x7", 4 + 4 + 2 + 8, 1, true, [](Workspace& ws, std::size_t i) {
+         PredictFromNeighboursInto(ws.ready[i % ws.ready.size()], {}, ws.prediction);
+         Sink(ws, ws.prediction.distance_m.data());
+       }});
   s.push_back({"frame pair (dual-frequency unwrap)", 10 + 10 + 10 + 10, 1, true,
                [](Workspace& ws, std::size_t i) {
                  const MetricFrame& in = ws.pair_17[i % ws.pair_17.size()];
@@ -453,6 +464,14 @@ std::vector<Stage> MakeStages() {
   s.push_back({"filter: uncertainty (ΔL + edges)", 4 + 4 + 2 + 2, 1, true,
                [](Workspace& ws, std::size_t i) {
                  UncertaintyFilterInto(ws.ready[i % ws.ready.size()], {}, ws.raised);
+                 Sink(ws, ws.raised.data());
+               }});
+  // The same judging each reading's residual against the neighbours' prediction (made before,
+  // not timed here): the prediction's distance and σ read as well.
+  s.push_back({"filter: uncertainty with the neighbours' prediction", 4 + 4 + 2 + 2 + 8, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 const std::size_t k = i % ws.ready.size();
+                 UncertaintyFilterInto(ws.ready[k], {}, ws.raised, &ws.predictions[k]);
                  Sink(ws, ws.raised.data());
                }});
   // Five frames at -60..60 degrees into the 180-degree cloud and panorama; per input frame

@@ -478,19 +478,51 @@ void UncertaintyOptions::Validate() const {
 
 namespace {
 
-void CheckInput(const MetricFrame& frame, const UncertaintyOptions& options) {
+// The noise term's square where the neighbours predict a pixel (PosteriorOfReading's
+// operations, branch-free so that the loop vectorises): m² + v, or v with `judge_combination`;
+// ΔL² where the posterior is not defined (no prediction, ΔL not positive, a non-finite value).
+TOFCAM_HOT_LOOP void PredictedNoiseSquared(std::size_t n, const float* __restrict d,
+                                           const float* __restrict s, const float* __restrict p,
+                                           const float* __restrict sp, bool judge_combination,
+                                           double* __restrict out) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < n; ++i) {
+    const double dc = d[i], sc = s[i], pc = p[i], spc = sp[i];
+    const bool defined = (sc > 0.0) & (spc > 0.0) & (std::abs(dc) < kInf) & (std::abs(pc) < kInf) &
+                         (sc < kInf) & (spc < kInf);
+    const double ratio = spc / sc;
+    const double gain = 1.0 / (1.0 + ratio * ratio);
+    const double a = std::min(sc, spc), b = std::max(sc, spc);
+    const double mean = (dc - pc) * gain;
+    const double v = a * a / (1.0 + (a / b) * (a / b));
+    const double n2 = judge_combination ? v : mean * mean + v;
+    out[i] = defined ? n2 : sc * sc;
+  }
+}
+
+void CheckInput(const MetricFrame& frame, const UncertaintyOptions& options,
+                const NeighbourPrediction* prediction) {
   options.Validate();
   const int w = frame.width(), h = frame.height();
   if (w <= 0 || h <= 0) Bad("uncertainty: empty frame");
   if (!frame.delta_l_m.SameSize(w, h) || !frame.flags.SameSize(w, h)) {
     Bad("uncertainty: the frame needs ΔL and flags of its size (enable the accuracy stage)");
   }
+  if (prediction != nullptr &&
+      (!prediction->distance_m.SameSize(w, h) || !prediction->sigma_m.SameSize(w, h))) {
+    throw Error(ErrorCode::kMismatch, "uncertainty: the neighbour prediction is " +
+                                          std::to_string(prediction->distance_m.width()) + "x" +
+                                          std::to_string(prediction->distance_m.height()) +
+                                          ", the frame " + std::to_string(w) + "x" +
+                                          std::to_string(h));
+  }
 }
 
 }  // namespace
 
-Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptions& options) {
-  CheckInput(frame, options);
+Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptions& options,
+                                const NeighbourPrediction* prediction) {
+  CheckInput(frame, options, prediction);
   const int w = frame.width(), h = frame.height();
   constexpr float kInf = std::numeric_limits<float>::infinity();
   auto usable = [&](std::size_t i) {
@@ -511,8 +543,22 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     const double si = frame.delta_l_m[i], sa = frame.delta_l_m[a], sb = frame.delta_l_m[b];
     return dev > options.min_jump_sigma * std::sqrt(si * si + 4 * sa * sa + sb * sb) ? dev : 0.0;
   };
+  // The noise term's square: ΔL², or where the neighbours predict the pixel what
+  // options.judge_combination asks for.
+  // With a prediction, the noise term's square of every pixel in one vectorised pass first.
+  thread_local std::vector<double> predicted_noise2;
+  if (prediction != nullptr) {
+    predicted_noise2.resize(frame.radial_distance_m.size());
+    PredictedNoiseSquared(frame.radial_distance_m.size(), frame.radial_distance_m.data(),
+                          frame.delta_l_m.data(), prediction->distance_m.data(),
+                          prediction->sigma_m.data(), options.judge_combination,
+                          predicted_noise2.data());
+  }
+  const auto noise2 = [&](std::size_t i, double s) {
+    return prediction == nullptr ? s * s : predicted_noise2[i];
+  };
   Image<float> out(w, h, kInf);
-  if (!options.extrapolate_edges) {
+  if (!options.extrapolate_edges && prediction == nullptr) {
     // Padded rows (one pixel each side; rows outside the image all padding): distances NaN
     // where not usable, ΔL, and the unknown-neighbour mask.
     const std::size_t pw = static_cast<std::size_t>(w) + 2;
@@ -573,30 +619,31 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
         edge = std::max(edge, e);
       }
       if (std::isinf(edge)) continue;  // next to a clipped pixel: unbounded
-      out[i] = static_cast<float>(std::sqrt(s * s + edge * edge));
+      out[i] = static_cast<float>(std::sqrt(noise2(i, s) + edge * edge));
     }
   }
   return out;
 }
 
-Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame, const UncertaintyOptions& options) {
+Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame, const UncertaintyOptions& options,
+                                    const NeighbourPrediction* prediction) {
   Image<PixelFlags> out;
-  UncertaintyFilterInto(frame, options, out);
+  UncertaintyFilterInto(frame, options, out, prediction);
   return out;
 }
 
 void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
-                           Image<PixelFlags>& out) {
+                           Image<PixelFlags>& out, const NeighbourPrediction* prediction) {
 #if defined(TOFCAM_AVX512_FORMS)
-  if (internal::UseAvx512Forms() && FloatFormCovers(options)) {
-    CheckInput(frame, options);
+  if (internal::UseAvx512Forms() && FloatFormCovers(options) && prediction == nullptr) {
+    CheckInput(frame, options, nullptr);
     if (!out.SameSize(frame.radial_distance_m))
       out = Image<PixelFlags>(frame.width(), frame.height());
     UncertaintyFlags16(frame, options, out);
     return;
   }
 #endif
-  const Image<float> u = ComputeUncertainty(frame, options);
+  const Image<float> u = ComputeUncertainty(frame, options, prediction);
   if (!out.SameSize(frame.radial_distance_m))
     out = Image<PixelFlags>(frame.width(), frame.height());
   // Rejected pixels (u = inf) already carry their reason; the others are judged (u = inf

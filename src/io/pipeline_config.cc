@@ -121,7 +121,21 @@ void VisitOptions(V& v, PipelineOptions& o) {
             "edge term: how far the pixel leaves its own side's line, not a part of the step");
     v.Field("unknown_neighbour_flags", FlagMask{o.uncertainty.unknown_neighbour_flags},
             "a pixel next to one with any of these flags is flagged");
+    v.Field("judge_combination", o.uncertainty.judge_combination,
+            "with prediction.combine: judge the delivered combination, not the reading");
   });
+  v.Section("prediction",
+            "each pixel's distance predicted by its neighbours: the uncertainty judges the "
+            "reading's residual (not in the paper)",
+            [&] {
+              v.Field("enabled", o.prediction_enabled, "needs accuracy.enabled");
+              v.Field("radius_px", o.prediction.radius_px, "largest window half-size, [1, 5]");
+              v.Field("max_disagreement_sigma", o.prediction.max_disagreement_sigma,
+                      "a window's pairs must agree within this many σ, (0, 100]");
+              v.Field("min_pairs", o.prediction.min_pairs, "usable pairs a window needs, [1, 60]");
+              v.Field("combine", o.prediction_combine,
+                      "deliver kept pixels as the combination of reading and prediction");
+            });
   v.Section("denoise",
             "ΔL-weighted mean of each pixel's own surface before the pair and the neighbourhood "
             "filters (not in the paper)",

@@ -67,6 +67,29 @@ void PipelineOptions::Validate() const {
     throw Error(ErrorCode::kInvalidArgument,
                 "uncertainty.enabled needs accuracy.enabled (the uncertainty starts from ΔL)");
   }
+  ValidateSection("prediction", [&] { prediction.Validate(); });
+  if (prediction_enabled && !accuracy_enabled) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "prediction.enabled needs accuracy.enabled (the pairs are weighted by ΔL)");
+  }
+  if (prediction_enabled && denoise_enabled) {
+    // Denoised readings are means over each 3x3 and share most of their readings, and their ΔL
+    // is the mean's σ: the pairs would be far from independent and the prediction would hold
+    // the centre's own reading, so σ_p and the posterior would be wrong.
+    throw Error(ErrorCode::kInvalidArgument,
+                "prediction.enabled and denoise.enabled exclude each other (the prediction needs "
+                "independent readings; denoised ones share their neighbours')");
+  }
+  if (prediction_enabled && !uncertainty_enabled && !prediction_combine) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "prediction.enabled without uncertainty.enabled or prediction.combine: nothing "
+                "would read the prediction");
+  }
+  if (uncertainty.judge_combination && !(prediction_enabled && prediction_combine)) {
+    throw Error(ErrorCode::kInvalidArgument,
+                "uncertainty.judge_combination needs prediction.enabled and prediction.combine "
+                "(it judges the combination the pipeline delivers)");
+  }
   ValidateSection("denoise", [&] { denoise.Validate(); });
   if (denoise_enabled && !accuracy_enabled) {
     throw Error(ErrorCode::kInvalidArgument,
@@ -221,7 +244,8 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
                          options_.accuracy.model->uses_edges();
   const bool late_cloud = edge_term || neighbourhood || confidence || options_.denoise_enabled ||
                           options_.smoothing_enabled || temporal_.has_value() ||
-                          pair_.has_value() || options_.uncertainty_enabled;
+                          pair_.has_value() || options_.uncertainty_enabled ||
+                          options_.prediction_enabled;
   MetricFrame& m = result.frame;
   pipeline_internal::FusedStages s;
   s.metric = options_.metric;
@@ -291,10 +315,19 @@ void Pipeline::Process(const Frame& camera_frame, PipelineResult& result) {
                                                result.filter_flags);
     MergeFlags(m, result.filter_flags);
   }
+  const NeighbourPrediction* prediction = nullptr;
+  if (options_.prediction_enabled) {
+    PredictFromNeighboursInto(m, options_.prediction, prediction_);
+    prediction = &prediction_;
+  }
   if (options_.uncertainty_enabled) {
-    UncertaintyFilterInto(m, options_.uncertainty, uncertain_);
+    UncertaintyFilterInto(m, options_.uncertainty, uncertain_, prediction);
     MergeFlags(m, uncertain_);
     for (std::size_t i = 0; i < uncertain_.size(); ++i) result.filter_flags[i] |= uncertain_[i];
+  }
+  // The pixels still kept take the combination of reading and prediction, in place.
+  if (prediction != nullptr && options_.prediction_combine) {
+    CombineWithPredictionInto(m, *prediction, m.radial_distance_m);
   }
   if (options_.smoothing_enabled) {
     SpatialFilterInto(m, options_.smoothing, smoothed_);

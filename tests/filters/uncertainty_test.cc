@@ -470,3 +470,107 @@ TEST(Uncertainty, BadInputIsAClearError) {
 
 }  // namespace
 }  // namespace tofcam
+
+namespace tofcam {
+namespace {
+
+// A prediction set by hand: p and σ_p everywhere (NaN = none).
+NeighbourPrediction HandPrediction(int w, int h, float p, float sigma_p) {
+  NeighbourPrediction pred;
+  pred.distance_m = Image<float>(w, h, p);
+  pred.sigma_m = Image<float>(w, h, sigma_p);
+  return pred;
+}
+
+TEST(Uncertainty, WithAPredictionTheNoiseTermIsTheReadingsExpectedError) {
+  // Three pixels, no edges (steps within 3 combined σ), each judged against a prediction of
+  // 2.00 m with σ_p 1 cm:
+  //  - a quiet reading (σ 1 cm) 8 cm off the prediction: gain 1/2, m = 4 cm, v = 0.5e-4:
+  //    u = sqrt(16e-4 + 0.5e-4) = 4.06 cm: kept at 5 cm (ΔL alone: 1 cm);
+  //  - the same but 12 cm off: m = 6 cm, u = 6.04 cm: flagged (ΔL alone would keep it);
+  //  - a noisy reading (σ 8 cm) 2 cm off: gain 64/65, m = 1.97 cm, v = 0.985e-4: u = 2.21 cm:
+  //    kept (ΔL alone: 8 cm, flagged).
+  const MetricFrame f = Pixels({2.08f, 2.12f, 2.02f}, {0.01f, 0.01f, 0.08f});
+  UncertaintyOptions o;
+  o.min_jump_sigma = 100.0;  // no edge terms: only the noise term is tested
+  const NeighbourPrediction p = HandPrediction(3, 1, 2.0f, 0.01f);
+  const Image<float> u = ComputeUncertainty(f, o, &p);
+  const auto expected = [](double d, double s, double sp) {
+    const double gain = s * s / (s * s + sp * sp);
+    const double m = (d - 2.0) * gain;
+    return std::sqrt(m * m + sp * sp * gain);
+  };
+  // Float readings (2.08f is 2.08 within 5e-8): 1e-6 m.
+  EXPECT_NEAR(u[0], expected(2.08f, 0.01f, 0.01f), 1e-6);
+  EXPECT_NEAR(u[1], expected(2.12f, 0.01f, 0.01f), 1e-6);
+  EXPECT_NEAR(u[2], expected(2.02f, 0.08f, 0.01f), 1e-6);
+  const Image<PixelFlags> flags = UncertaintyFilter(f, o, &p);
+  EXPECT_FALSE(flags[0].Has(Flag::kLowConfidence));
+  EXPECT_TRUE(flags[1].Has(Flag::kLowConfidence));
+  EXPECT_FALSE(flags[2].Has(Flag::kLowConfidence));
+  // Without the prediction, ΔL decides: the reverse for the last two.
+  const Image<PixelFlags> plain = UncertaintyFilter(f, o);
+  EXPECT_FALSE(plain[1].Has(Flag::kLowConfidence));
+  EXPECT_TRUE(plain[2].Has(Flag::kLowConfidence));
+  // judge_combination: the combination's σ, sqrt(v), whatever the residual.
+  o.judge_combination = true;
+  const Image<float> uc = ComputeUncertainty(f, o, &p);
+  EXPECT_NEAR(uc[1], std::sqrt(0.5e-4), 1e-6);
+  EXPECT_NEAR(uc[2], 0.01 * std::sqrt(64.0 / 65.0), 1e-6);
+  // Where there is no prediction, ΔL: the pixel's σ.
+  NeighbourPrediction none = HandPrediction(3, 1, std::numeric_limits<float>::quiet_NaN(),
+                                            std::numeric_limits<float>::quiet_NaN());
+  o.judge_combination = false;
+  const Image<float> un = ComputeUncertainty(f, o, &none);
+  EXPECT_NEAR(un[2], 0.08, 1e-7);
+  // Edge terms still add: a step beyond 3 combined σ next to a predicted pixel.
+  o.min_jump_sigma = 3.0;
+  const MetricFrame g = Pixels({2.0f, 2.0f, 3.0f}, {0.01f, 0.01f, 0.01f});
+  const NeighbourPrediction q = HandPrediction(3, 1, 2.0f, 0.01f);
+  const Image<float> ue = ComputeUncertainty(g, o, &q);
+  EXPECT_NEAR(ue[1], std::sqrt(0.5e-4 + 0.25), 1e-6);  // v + (half the 1 m step)²
+}
+
+TEST(Uncertainty, WithoutAnyPredictedPixelThePerPixelFormGivesTheSameBits) {
+  // A prediction makes every frame take the per-pixel form; where no pixel has one it must equal
+  // the row form bit for bit: random frames with steps near the edge test's threshold, rejected
+  // pixels and unknown-neighbour flags.
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int trial = 0; trial < 20; ++trial) {
+    const int w = 3 + static_cast<int>(u(rng) * 40), h = 1 + static_cast<int>(u(rng) * 20);
+    MetricFrame f = Blank(w, h);
+    for (std::size_t i = 0; i < f.radial_distance_m.size(); ++i) {
+      f.radial_distance_m[i] = 2.0f + (u(rng) < 0.3f ? 0.5f * u(rng) : 0.02f * u(rng));
+      f.delta_l_m[i] = 0.005f + 0.03f * u(rng);
+      const float x = u(rng);
+      if (x < 0.05f) f.flags[i].Set(Flag::kSaturated);
+      if (x > 0.95f) f.flags[i].Set(Flag::kInconsistent);
+    }
+    UncertaintyOptions o;
+    o.unknown_neighbour_flags = PixelFlags(Flag::kSaturated).bits();
+    const NeighbourPrediction none = HandPrediction(w, h, std::numeric_limits<float>::quiet_NaN(),
+                                                    std::numeric_limits<float>::quiet_NaN());
+    const Image<float> a = ComputeUncertainty(f, o), b = ComputeUncertainty(f, o, &none);
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      ASSERT_EQ(std::memcmp(&a[i], &b[i], sizeof(float)), 0)
+          << trial << " " << i << " " << a[i] << " " << b[i];
+    }
+  }
+}
+
+TEST(Uncertainty, APredictionOfAnotherSizeIsRefused) {
+  const MetricFrame f = Pixels({2.0f, 2.0f}, {0.01f, 0.01f});
+  const NeighbourPrediction p = HandPrediction(3, 1, 2.0f, 0.01f);
+  try {
+    (void)ComputeUncertainty(f, {}, &p);
+    ADD_FAILURE() << "accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::kMismatch);
+  }
+  Image<PixelFlags> out;
+  EXPECT_THROW(UncertaintyFilterInto(f, {}, out, &p), Error);
+}
+
+}  // namespace
+}  // namespace tofcam

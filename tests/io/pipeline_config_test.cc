@@ -76,6 +76,12 @@ void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.uncertainty.min_jump_sigma, b.uncertainty.min_jump_sigma);
   EXPECT_EQ(a.uncertainty.extrapolate_edges, b.uncertainty.extrapolate_edges);
   EXPECT_EQ(a.uncertainty.unknown_neighbour_flags, b.uncertainty.unknown_neighbour_flags);
+  EXPECT_EQ(a.uncertainty.judge_combination, b.uncertainty.judge_combination);
+  EXPECT_EQ(a.prediction_enabled, b.prediction_enabled);
+  EXPECT_EQ(a.prediction.radius_px, b.prediction.radius_px);
+  EXPECT_EQ(a.prediction.max_disagreement_sigma, b.prediction.max_disagreement_sigma);
+  EXPECT_EQ(a.prediction.min_pairs, b.prediction.min_pairs);
+  EXPECT_EQ(a.prediction_combine, b.prediction_combine);
   EXPECT_EQ(a.denoise_enabled, b.denoise_enabled);
   EXPECT_EQ(a.denoise.radius_px, b.denoise.radius_px);
   EXPECT_EQ(a.denoise.support_sigma, b.denoise.support_sigma);
@@ -160,7 +166,13 @@ PipelineOptions Unusual() {
   o.uncertainty.min_jump_sigma = 2.5;
   o.uncertainty.extrapolate_edges = true;
   o.uncertainty.unknown_neighbour_flags = PixelFlags(Flag::kSaturated).bits();
-  o.denoise_enabled = true;
+  o.uncertainty.judge_combination = true;
+  o.prediction_enabled = true;
+  o.prediction.radius_px = 2;
+  o.prediction.max_disagreement_sigma = 3.5;
+  o.prediction.min_pairs = 5;
+  o.prediction_combine = true;
+  o.denoise_enabled = false;  // excludes the prediction: its flag round-trips in the test below
   o.denoise.radius_px = 2;
   o.denoise.support_sigma = 2.5;
   o.denoise.max_step_m = 0.2;
@@ -206,6 +218,17 @@ TEST(PipelineConfigTest, EveryFieldRoundTrips) {
   // Guard against a vacuous comparison: the unusual options really differ from the defaults.
   EXPECT_NE(back.accuracy.scale, PipelineOptions{}.accuracy.scale);
   EXPECT_EQ(back.controller.kind, ControllerKind::kVendorHistogram);
+}
+
+TEST(PipelineConfigTest, TheDenoiseFlagRoundTrips) {
+  // The unusual options above have the neighbours' prediction on, which excludes the denoising.
+  PipelineOptions o = Unusual();
+  o.prediction_enabled = false;
+  o.uncertainty.judge_combination = false;
+  o.denoise_enabled = true;
+  const PipelineOptions back = ParsePipelineConfig(PipelineConfigToYaml(o), "denoised");
+  ExpectSameOptions(o, back);
+  EXPECT_TRUE(back.denoise_enabled);
 }
 
 TEST(PipelineConfigTest, PrintedDefaultsNameEveryStage) {

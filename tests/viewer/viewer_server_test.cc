@@ -13,6 +13,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -66,6 +67,38 @@ class ViewerServerTest : public ::testing::Test {
     }
     return false;
   }
+  // The next frame the server sends: its size and its planes ("distance_m", "delta_l_m",
+  // "flags", ...) by name, as raw bytes.
+  struct SentFrame {
+    int width = 0, height = 0;
+    std::map<std::string, std::string> planes;
+    // A plane as values of T (empty when the frame has no such plane).
+    template <typename T>
+    std::vector<T> Plane(const std::string& name) const {
+      const auto it = planes.find(name);
+      if (it == planes.end()) return {};
+      std::vector<T> values(it->second.size() / sizeof(T));
+      std::memcpy(values.data(), it->second.data(), values.size() * sizeof(T));
+      return values;
+    }
+  };
+  SentFrame NextFrame() {
+    SentFrame f;
+    const auto r = client_->Get("/frame?after=" + std::to_string(server_->Status().frames));
+    EXPECT_TRUE(r && r->status == 200);
+    if (!r || r->status != 200) return f;
+    std::uint32_t prefix[3];
+    std::memcpy(prefix, r->body.data(), 12);
+    const json h = json::parse(r->body.substr(12, prefix[2]));
+    f.width = h.at("width");
+    f.height = h.at("height");
+    for (const json& p : h.at("planes")) {
+      f.planes[p.at("name")] = r->body.substr(12 + prefix[2] + p.at("offset").get<std::size_t>(),
+                                              p.at("bytes").get<std::size_t>());
+    }
+    return f;
+  }
+
   int Post(const std::string& body, std::string* reply = nullptr) {
     const auto r = client_->Post("/control", body, "application/json");
     if (!r) return -1;
@@ -217,21 +250,12 @@ TEST_F(ViewerServerTest, ControlsApplyToTheNextFrames) {
   // Scene parameters reopen the simulator: the hand moves from 0.2 to 0.6 m, and a pixel at
   // the image centre (on the hand in both) reads about 0.4 m further.
   const auto centre_distance = [&] {
-    const auto r = client_->Get("/frame?after=" + std::to_string(server_->Status().frames));
-    std::uint32_t prefix[3];
-    std::memcpy(prefix, r->body.data(), 12);
-    const json h = json::parse(r->body.substr(12, prefix[2]));
-    for (const json& p : h.at("planes")) {
-      if (p.at("name") != "distance_m") continue;
-      const int w = h.at("width"), ht = h.at("height");
-      float d;
-      std::memcpy(&d,
-                  r->body.data() + 12 + prefix[2] + p.at("offset").get<std::size_t>() +
-                      4 * (static_cast<std::size_t>(ht / 2) * w + w / 2),
-                  4);
-      return static_cast<double>(d);
-    }
-    return -1.0;
+    const SentFrame frame = NextFrame();
+    const std::vector<float> d = frame.Plane<float>("distance_m");
+    const std::size_t centre =
+        static_cast<std::size_t>(frame.height / 2) * static_cast<std::size_t>(frame.width) +
+        static_cast<std::size_t>(frame.width / 2);
+    return centre < d.size() ? static_cast<double>(d[centre]) : -1.0;
   };
   const double near = centre_distance();
   ASSERT_EQ(Post(R"({"scene": {"hand_distance_m": 0.6}})", &reply), 200) << reply;
@@ -390,26 +414,13 @@ TEST(ViewerServerStandalone, AnotherLoopbackAddressStillChecksTheHost) {
   server.Stop();
 }
 
-TEST_F(ViewerServerTest, TheDenoiseToggleLowersTheFramesDeltaL) {
+TEST_F(ViewerServerTest, TheDenoiseAndPredictionTogglesReachTheFrames) {
   // The hand scene, held at one exposure. Denoising makes each usable pixel's ΔL that of the
   // inverse-variance mean of its support: σ / 3 where all nine neighbours of equal σ take
   // part, so the median ΔL of the pixels with one falls well below half (the hand's edges and
   // the image border have smaller supports; 0.6 leaves room for them). The metadata reports it.
   const auto median_delta_l = [&] {
-    const auto r = client_->Get("/frame?after=" + std::to_string(server_->Status().frames));
-    EXPECT_TRUE(r && r->status == 200);
-    std::uint32_t prefix[3];
-    std::memcpy(prefix, r->body.data(), 12);
-    const json h = json::parse(r->body.substr(12, prefix[2]));
-    std::vector<float> values;
-    for (const json& p : h.at("planes")) {
-      if (p.at("name") != "delta_l_m") continue;
-      const std::size_t n = static_cast<std::size_t>(h.at("width").get<int>()) *
-                            static_cast<std::size_t>(h.at("height").get<int>());
-      values.resize(n);
-      std::memcpy(values.data(),
-                  r->body.data() + 12 + prefix[2] + p.at("offset").get<std::size_t>(), n * 4);
-    }
+    const std::vector<float> values = NextFrame().Plane<float>("delta_l_m");
     std::vector<float> finite;
     for (const float v : values) {
       if (std::isfinite(v) && v > 0.0f) finite.push_back(v);
@@ -429,6 +440,44 @@ TEST_F(ViewerServerTest, TheDenoiseToggleLowersTheFramesDeltaL) {
   const auto meta = client_->Get("/meta");
   ASSERT_TRUE(meta && meta->status == 200);
   EXPECT_TRUE(json::parse(meta->body).at("filters").at("denoise").get<bool>());
+  // The neighbours' prediction is a stage toggled with the filters too; it excludes the
+  // denoising. Kept pixels are delivered combined with what up to 48 neighbours predict, so
+  // horizontally adjacent kept distances on the hand and the wall differ far less than two
+  // readings do: the median step falls well below half (measured: 10 mm to 0.8 mm; neighbouring
+  // predictions share most of their readings).
+  EXPECT_FALSE(json::parse(meta->body).at("filters").at("prediction").get<bool>());
+  std::string reply;
+  ASSERT_EQ(Post(R"({"filters": {"prediction": true}})", &reply), 400) << reply;
+  EXPECT_NE(reply.find("exclude each other"), std::string::npos) << reply;
+  const auto median_step = [&] {
+    const SentFrame frame = NextFrame();
+    const std::vector<float> d = frame.Plane<float>("distance_m");
+    const std::vector<std::uint16_t> flags = frame.Plane<std::uint16_t>("flags");
+    EXPECT_EQ(d.size(), flags.size());
+    // Steps between two kept pixels of one surface (not across an edge).
+    std::vector<float> steps;
+    for (std::size_t i = 0; i + 1 < d.size(); ++i) {
+      if (((flags[i] | flags[i + 1]) & kRejectMask) != 0) continue;
+      const float step = std::abs(d[i + 1] - d[i]);
+      if (std::isfinite(step) && step < 0.2f) steps.push_back(step);
+    }
+    EXPECT_GT(steps.size(), d.size() / 10);
+    std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+    return steps.empty() ? 0.0 : double{steps[steps.size() / 2]};
+  };
+  ASSERT_EQ(Post(R"({"filters": {"denoise": false}})"), 200);
+  ASSERT_TRUE(WaitFrames(3));
+  const double raw_step = median_step();
+  ASSERT_EQ(Post(R"({"filters": {"prediction": true}})", &reply), 200) << reply;
+  ASSERT_TRUE(WaitFrames(3));
+  const double combined_step = median_step();
+  EXPECT_GT(raw_step, 0.0);
+  EXPECT_LT(combined_step, 0.5 * raw_step) << raw_step << " -> " << combined_step;
+  const auto after = client_->Get("/meta");
+  ASSERT_TRUE(after && after->status == 200);
+  const json filters = json::parse(after->body).at("filters");
+  EXPECT_TRUE(filters.at("prediction").get<bool>());
+  EXPECT_TRUE(filters.at("uncertainty").get<bool>());  // the prediction brings it
 }
 
 }  // namespace

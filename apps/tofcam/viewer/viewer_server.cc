@@ -290,7 +290,8 @@ std::string ViewerServer::Impl::MetaJson() const {
                   {"flying_pixel", p.filters.flying_pixel_enabled},
                   {"weingarten", p.filters.weingarten_enabled},
                   {"uncertainty", p.uncertainty_enabled},
-                  {"denoise", p.denoise_enabled}};
+                  {"denoise", p.denoise_enabled},
+                  {"prediction", p.prediction_enabled}};
   m["max_delta_l_m"] = p.filters.accuracy.max_delta_l_m;
   m["min_amplitude"] = p.filters.amplitude.min_amplitude;
   m["max_uncertainty_m"] = p.uncertainty.max_uncertainty_m;
@@ -373,6 +374,17 @@ std::string ViewerServer::Impl::Stage(const json& j, Staged& s) const {
             // Not a filter but a stage before them (docs/beyond.md); toggled with them.
             p.denoise_enabled = b;
             if (b) p.accuracy_enabled = true;
+          } else if (name == "prediction") {
+            // The neighbours' prediction: the uncertainty judges residuals, kept pixels are
+            // combined with it (docs/beyond.md). On, it brings ΔL and the uncertainty that
+            // judges against it; off, the uncertainty cannot judge a combination that is gone.
+            p.prediction_enabled = b;
+            if (b) {
+              p.accuracy_enabled = true;
+              p.uncertainty_enabled = true;
+            } else {
+              p.uncertainty.judge_combination = false;
+            }
           } else {
             throw std::string("unknown filter '" + name + "'");
           }

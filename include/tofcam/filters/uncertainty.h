@@ -17,10 +17,16 @@
 /// cannot be bounded (and the camera blooms into exactly the neighbours of clipped pixels); a
 /// neighbour rejected for being dark or noisy is merely no evidence. One threshold, in metres,
 /// then decides.
+///
+/// With the neighbours' prediction (tofcam/filters/neighbour_prediction.h; the overloads below
+/// that take one), ΔL in the noise term is replaced, where a pixel has a prediction, by the
+/// reading's expected error given its residual against the prediction, sqrt(m² + v), or by the
+/// combination's σ, sqrt(v) (`judge_combination`); the edge terms are unchanged.
 
 #include <cstdint>
 
 #include "tofcam/core/frame.h"
+#include "tofcam/filters/neighbour_prediction.h"
 
 namespace tofcam {
 
@@ -46,24 +52,38 @@ struct UncertaintyOptions {
   /// kSaturated | kInconsistent lowers the kept pixels' RMSE within L from 237 to 218 mm but
   /// flags good pixels too (F1 0.804 -> 0.785); kSaturated alone changes neither much.
   std::uint16_t unknown_neighbour_flags = 0;
+  /// With a neighbour prediction (tofcam/filters/neighbour_prediction.h, the overloads below
+  /// that take one): where a pixel has a prediction, the noise term ΔL is replaced by
+  ///  - false (the default): the reading's expected error given its residual against the
+  ///    prediction, sqrt(m² + v): a reading the neighbours contradict is judged by how far it
+  ///    probably is off, not by its σ;
+  ///  - true: the σ of the reading's combination with the prediction, sqrt(v): for a pipeline
+  ///    that delivers the combination (PipelineOptions::prediction_combine), which is then what
+  ///    is judged.
+  bool judge_combination = false;
   void Validate() const;
 };
 
-/// u per pixel, m (see the file comment). Throws Error(kInvalidArgument) for bad options, an
-/// empty frame or one without ΔL.
+/// u per pixel, m (see the file comment). With `prediction` (PredictFromNeighbours of the same
+/// frame; null = none), the noise term of a pixel with a prediction is as
+/// `options.judge_combination` says. Throws Error(kInvalidArgument) for bad options, an empty
+/// frame or one without ΔL, Error(kMismatch) for a prediction of another size.
 [[nodiscard]] Image<float> ComputeUncertainty(const MetricFrame& frame,
-                                              const UncertaintyOptions& options = {});
+                                              const UncertaintyOptions& options = {},
+                                              const NeighbourPrediction* prediction = nullptr);
 
 /// kLowConfidence where u > max_uncertainty_m (only the flags it raises, as every filter).
 [[nodiscard]] Image<PixelFlags> UncertaintyFilter(const MetricFrame& frame,
-                                                  const UncertaintyOptions& options = {});
+                                                  const UncertaintyOptions& options = {},
+                                                  const NeighbourPrediction* prediction = nullptr);
 
 /// Same, into `out`: resized to the frame's size when it differs, then every pixel overwritten
 /// (kLowConfidence or nothing), so a per-frame loop allocates no output image (with the default
-/// options on AVX-512 CPUs nothing at all; elsewhere the u image of ComputeUncertainty is still
-/// made per call). `out` must not be one of the frame's channels. Throws as ComputeUncertainty,
-/// before `out` is touched.
+/// options, no prediction and an AVX-512 CPU nothing at all; otherwise the u image of
+/// ComputeUncertainty is still made per call, and with a prediction or `extrapolate_edges` it
+/// is computed pixel by pixel: 16-17 ns a pixel against 0.9, docs/benchmarks.md). `out` must not be
+/// one of the frame's channels. Throws as ComputeUncertainty, before `out` is touched.
 void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
-                           Image<PixelFlags>& out);
+                           Image<PixelFlags>& out, const NeighbourPrediction* prediction = nullptr);
 
 }  // namespace tofcam

@@ -32,6 +32,7 @@
 #include "tofcam/filters/denoise.h"
 #include "tofcam/filters/filter_set.h"
 #include "tofcam/filters/frame_pair.h"
+#include "tofcam/filters/neighbour_prediction.h"
 #include "tofcam/filters/spatial_filter.h"
 #include "tofcam/filters/temporal_filter.h"
 #include "tofcam/filters/uncertainty.h"
@@ -73,6 +74,20 @@ struct PipelineOptions {
   /// threshold judges the lowered ΔL again. Needs ΔL (accuracy.enabled). Off by default.
   bool denoise_enabled = false;
   DenoiseOptions denoise;
+
+  /// The neighbours' prediction (tofcam/filters/neighbour_prediction.h; not in the paper),
+  /// after the frame pair and the neighbourhood filters: each pixel's distance predicted from
+  /// the symmetric pairs of its window. The uncertainty, when enabled, then judges a predicted
+  /// pixel's reading by its residual against the prediction instead of by its ΔL alone. Needs
+  /// ΔL, and the uncertainty or `prediction_combine` (something must read it); excludes
+  /// `denoise_enabled` (denoised readings are not independent). Off by default.
+  bool prediction_enabled = false;
+  NeighbourPredictionOptions prediction;
+  /// With the prediction: every pixel that is still kept after the uncertainty and has a
+  /// prediction is delivered as the combination of its reading and the prediction
+  /// (CombineWithPrediction; ΔL unchanged), before the smoothing, the temporal filter and the
+  /// cloud.
+  bool prediction_combine = true;
 
   /// The combined uncertainty (ΔL plus edges, tofcam/filters/uncertainty.h) with one threshold
   /// in metres, after the other filters: kLowConfidence. Needs ΔL. Off by default.
@@ -232,10 +247,11 @@ class Pipeline {
   std::unique_ptr<IntegrationTimeController> controller_;
   std::optional<TemporalFilter> temporal_;
   Image<float> smoothed_;
-  DenoisedChannels denoised_;    // the denoising's output, swapped into the frame
-  Image<PixelFlags> rejudged_;   // the accuracy threshold judged again (JudgeDeltaLAgain)
-  Image<PixelFlags> uncertain_;  // the uncertainty filter's flags (UncertaintyFilterInto)
-  Frame compensated_;            // the scattering compensation's output, reused per frame
+  DenoisedChannels denoised_;       // the denoising's output, swapped into the frame
+  Image<PixelFlags> rejudged_;      // the accuracy threshold judged again (JudgeDeltaLAgain)
+  Image<PixelFlags> uncertain_;     // the uncertainty filter's flags (UncertaintyFilterInto)
+  NeighbourPrediction prediction_;  // PredictFromNeighboursInto's output, reused per frame
+  Frame compensated_;               // the scattering compensation's output, reused per frame
   std::optional<FramePairCombiner> pair_;
   // HDR: the register the controller chose at the last base exposure, and whether the frame
   // being processed is the long one.

@@ -12,9 +12,10 @@ const state = {
 window.viewerState = state;
 
 // 'denoise' is the stage before the filters (each pixel the mean, or with fit_plane in the
-// configuration the fitted plane, of its own surface's 3x3).
+// configuration the fitted plane, of its own surface's 3x3); 'prediction' the neighbours'
+// prediction, which the uncertainty judges residuals against and kept pixels are combined with.
 const FILTERS = ['saturation', 'accuracy', 'amplitude', 'jump_edge', 'flying_pixel',
-                 'weingarten', 'uncertainty', 'denoise'];
+                 'weingarten', 'uncertainty', 'denoise', 'prediction'];
 // Which filter removed a pixel, in the order they are judged; colours for the cause image.
 const CAUSES = [
   ['saturated', [255, 255, 255]], ['low-amplitude', [80, 80, 255]],
