@@ -1,8 +1,11 @@
 // `tofcam experiment beyond` (issue 18): the methods beyond the paper against the paper's own
 // and the vendor driver's, on every built-in scene, scored against the simulator's truth. Every
 // method runs its own closed loop (controller, camera, pipeline) on the same scene with the same
-// noise seed; nothing here was tuned to these scenes (constants are the library's defaults, the
-// scattering point-spread is estimated from a separate calibration scene).
+// noise seed. The constants are the library's defaults and the scattering point-spread is
+// estimated from a separate calibration scene, with two exceptions chosen on these scenes (and
+// said so in docs/beyond.md): the denoising's 0.15 m step limit, and the neighbours' prediction's
+// window, agreement test and accuracy gate (kPredictionGateM). A held-out pass scores the main
+// rows on scene variants that chose nothing.
 #include "experiment_common.h"
 #include "tofcam/filters/frame_pair.h"
 #include "tofcam/optics/scattering.h"
@@ -424,26 +427,42 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
       "demo?daylight_w_m2=2"};
   const std::vector<std::size_t> held_out_methods = {0, 1, 5, 8, 15, 16};
   std::vector<Score> held_out(methods.size());
+  // Pooled over pixels, the dynamic variants (demo, lamps) weigh most: the per-variant F1 and
+  // their plain mean as well.
+  std::vector<double> held_out_mean(methods.size(), 0.0);
+  Table held_scenes{"beyond_held_out_scenes",
+                    {"variant", "method", "frames", "F1 (5 cm)", "good kept (of all pixels)",
+                     "bad kept (of all pixels)"},
+                    {},
+                    false};
   for (std::size_t v = 0; v < held_out_scenes.size(); ++v) {
     for (const std::size_t k : held_out_methods) {
       const Method& m = methods[k];
       const PipelineOptions p = MethodOptions(m, s, alternate, psf);
-      held_out[k].Merge(RunMethod(m, held_out_scenes[v], 900 + v, p, o));
+      const Score score = RunMethod(m, held_out_scenes[v], 900 + v, p, o);
+      held_out[k].Merge(score);
+      held_out_mean[k] += score.F1() / static_cast<double>(held_out_scenes.size());
+      const long long kept = score.pixels - score.rejected;
+      held_scenes.rows.push_back({held_out_scenes[v], m.name, I(score.frames), F(score.F1(), 3),
+                                  Pct(Ratio(kept - score.central.kept_bad, score.pixels)),
+                                  Pct(Ratio(score.central.kept_bad, score.pixels))});
     }
   }
   Table held{"beyond_held_out",
-             {"method", "F1 (5 cm)", "precision", "recall", "good kept (of all pixels)",
-              "bad kept (of all pixels)", "RMSE kept within L", "F1 on the built-in scenes"},
+             {"method", "F1 (5 cm)", "mean of the variants' F1", "precision", "recall",
+              "good kept (of all pixels)", "bad kept (of all pixels)", "RMSE kept within L",
+              "F1 on the built-in scenes"},
              {},
              true};
   for (const std::size_t k : held_out_methods) {
     const Score& c = held_out[k];
     const long long kept = c.pixels - c.rejected;
-    held.rows.push_back({methods[k].name, F(c.F1(), 3), F(c.Precision(), 3), F(c.Recall(), 3),
-                         Pct(Ratio(kept - c.central.kept_bad, c.pixels)),
+    held.rows.push_back({methods[k].name, F(c.F1(), 3), F(held_out_mean[k], 3), F(c.Precision(), 3),
+                         F(c.Recall(), 3), Pct(Ratio(kept - c.central.kept_bad, c.pixels)),
                          Pct(Ratio(c.central.kept_bad, c.pixels)), Mm(c.RmseInRange()),
                          F(pooled[k].F1(), 3)});
     r.metrics[methods[k].name + ".held_out_f1"] = c.F1();
+    r.metrics[methods[k].name + ".held_out_mean_f1"] = held_out_mean[k];
     r.metrics[methods[k].name + ".held_out_good_kept"] = Ratio(kept - c.central.kept_bad, c.pixels);
   }
   Table summary{"beyond_summary",
@@ -543,6 +562,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
   r.tables.push_back(alarms);
   r.tables.push_back(per_scene);
   r.tables.push_back(held);
+  r.tables.push_back(held_scenes);
 
   const auto metric = [&](std::size_t k, const std::string& key) {
     return r.metrics[methods[k].name + "." + key];
@@ -569,8 +589,11 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
          << F(psf.psf.lobes[l].sigma_px, 3) << " px";
   }
   text << ".\n\nF1 at 5 cm: paper " << F(metric(0, "f1"), 3) << ", vendor " << F(metric(1, "f1"), 3)
-       << ", the full set of methods beyond the paper " << F(metric(5, "f1"), 3)
-       << " (issue 18's target: 0.9). RMSE of kept pixels within L: paper "
+       << ", two frequencies with the uncertainty (model-based exposure, scattering "
+          "compensation) "
+       << F(metric(5, "f1"), 3)
+       << " (issue 18's target: 0.9; the neighbours' prediction below reaches it). RMSE of kept "
+          "pixels within L: paper "
        << Mm(metric(0, "rmse_kept_within_l")) << ", vendor " << Mm(metric(1, "rmse_kept_within_l"))
        << ", beyond " << Mm(metric(5, "rmse_kept_within_l"))
        << " (target 50 mm). Surfaces beyond L kept and right: paper "
@@ -645,7 +668,13 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
           "edge terms "
        << F(r.metrics[methods[8].name + ".held_out_f1"], 3)
        << ", with the prediction judging the reading and kept pixels combined "
-       << F(r.metrics[methods[15].name + ".held_out_f1"], 3) << ".\n\n"
+       << F(r.metrics[methods[15].name + ".held_out_f1"], 3)
+       << " (pooled over pixels, so the two dynamic variants, demo and lamps, weigh most; the "
+          "plain mean of the variants' F1: paper "
+       << F(r.metrics[methods[0].name + ".held_out_mean_f1"], 3) << ", the bilateral row "
+       << F(r.metrics[methods[8].name + ".held_out_mean_f1"], 3) << ", the prediction "
+       << F(r.metrics[methods[15].name + ".held_out_mean_f1"], 3)
+       << "; per variant: `beyond_held_out_scenes.csv`).\n\n"
        << "Per-pixel ceiling F1: the best F1 a rejection rule could reach on the same frames if it "
           "were told each pixel's true σ (the simulator's, combined for two-frame methods) and "
           "whether a systematic cause (mixed, multipath, scattering, saturation, beyond L, "
@@ -722,6 +751,7 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        {std::pair{"paper", 0}, std::pair{"beyond", 5}, std::pair{"smoothed_own_side", 8},
         std::pair{"predicted_combined", 15}, std::pair{"predicted_judged_combination", 16}}) {
     r.metrics[std::string(alias) + ".held_out_f1"] = metric(k, "held_out_f1");
+    r.metrics[std::string(alias) + ".held_out_mean_f1"] = metric(k, "held_out_mean_f1");
     r.metrics[std::string(alias) + ".held_out_good_kept"] = metric(k, "held_out_good_kept");
   }
   return r;

@@ -132,7 +132,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
               v.Field("radius_px", o.prediction.radius_px, "largest window half-size, [1, 5]");
               v.Field("max_disagreement_sigma", o.prediction.max_disagreement_sigma,
                       "a window's pairs must agree within this many σ, (0, 100]");
-              v.Field("min_pairs", o.prediction.min_pairs, "usable pairs a window needs, [1, 60]");
+              v.Field("min_pairs", o.prediction.min_pairs,
+                      "usable pairs a window needs, [1, 2 R (R + 1)]: 24 at radius 3");
               v.Field("combine", o.prediction_combine,
                       "deliver kept pixels as the combination of reading and prediction");
             });

@@ -81,8 +81,8 @@ struct UncertaintyOptions {
 /// (kLowConfidence or nothing), so a per-frame loop allocates no output image (with the default
 /// options, no prediction and an AVX-512 CPU nothing at all; otherwise the u image of
 /// ComputeUncertainty is still made per call, and with a prediction or `extrapolate_edges` it
-/// is computed pixel by pixel: 16-17 ns a pixel against 0.9, docs/benchmarks.md). `out` must not be
-/// one of the frame's channels. Throws as ComputeUncertainty, before `out` is touched.
+/// is computed pixel by pixel: about 16 ns a pixel against 0.9, docs/benchmarks.md). `out` must not
+/// be one of the frame's channels. Throws as ComputeUncertainty, before `out` is touched.
 void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
                            Image<PixelFlags>& out, const NeighbourPrediction* prediction = nullptr);
 
