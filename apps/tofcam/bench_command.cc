@@ -450,17 +450,27 @@ std::vector<Stage> MakeStages() {
          PredictFromNeighboursInto(ws.ready[i % ws.ready.size()], {}, ws.prediction);
          Sink(ws, ws.prediction.distance_m.data());
        }});
-  s.push_back({"frame pair (dual-frequency unwrap)", 10 + 10 + 10 + 10, 1, true,
-               [](Workspace& ws, std::size_t i) {
-                 const MetricFrame& in = ws.pair_17[i % ws.pair_17.size()];
-                 MetricFrame& m = ws.pair_work;
-                 m.radial_distance_m = in.radial_distance_m;
-                 m.delta_l_m = in.delta_l_m;
-                 m.flags = in.flags;
-                 m.info = in.info;
-                 CombineFramePair(ws.ready[(i + 1) % ws.ready.size()], m);
-                 Sink(ws, m.radial_distance_m.data());
-               }});
+  // With the amplitudes, so that the two-returns checks run as in a pipeline: the per-pixel one
+  // and the pooled one over 7x7 windows (the defaults). Both frames' distance, ΔL, amplitude and
+  // flags read, the current frame's distance, ΔL and flags written, plus the copy that restores
+  // them.
+  const auto pair_row = [](int radius_px) {
+    return [radius_px](Workspace& ws, std::size_t i) {
+      const MetricFrame& in = ws.pair_17[i % ws.pair_17.size()];
+      MetricFrame& m = ws.pair_work;
+      m.radial_distance_m = in.radial_distance_m;
+      m.delta_l_m = in.delta_l_m;
+      m.amplitude = in.amplitude;
+      m.flags = in.flags;
+      m.info = in.info;
+      FramePairOptions o;
+      o.two_returns_radius_px = radius_px;
+      CombineFramePair(ws.ready[(i + 1) % ws.ready.size()], m, o);
+      Sink(ws, m.radial_distance_m.data());
+    };
+  };
+  s.push_back({"frame pair (dual-frequency unwrap)", 14 + 14 + 10 + 14, 1, true, pair_row(3)});
+  s.push_back({"frame pair, per-pixel checks only", 14 + 14 + 10 + 14, 1, true, pair_row(0)});
   s.push_back({"filter: uncertainty (ΔL + edges)", 4 + 4 + 2 + 2, 1, true,
                [](Workspace& ws, std::size_t i) {
                  UncertaintyFilterInto(ws.ready[i % ws.ready.size()], {}, ws.raised);

@@ -195,6 +195,10 @@ void VisitOptions(V& v, PipelineOptions& o) {
         v.Field("max_motion_m", o.frame_pair.max_motion_m,
                 "two frequencies: a disagreement up to this that leaves the wrap count certain "
                 "is motion (the current reading is kept); 0 = off, m, [0, 10]");
+        v.Field("two_returns_radius_px", o.frame_pair.two_returns_radius_px,
+                "two frequencies: window half-size over which the two-returns check also pools "
+                "amplitude ratio and distance difference (multipath over regions); 0 = per pixel "
+                "only, [0, 5]; 0 with denoise");
       });
   v.Section("controller", "Stage 4: integration time; frame t sets frame t + 1", [&] {
     v.Field("enabled", o.controller_enabled, "off: the register is left alone");

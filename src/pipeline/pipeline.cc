@@ -128,6 +128,15 @@ void PipelineOptions::Validate() const {
                   "consecutive frames: use one of them");
     }
   });
+  if (frame_pair_enabled && denoise_enabled && frame_pair.two_returns_radius_px > 0 &&
+      hdr_exposure_ratio == 0.0) {
+    // Denoised readings share their neighbours', so a window's mean of them is far from the
+    // mean of independent readings its σ assumes: the pooled check would flag noise.
+    throw Error(ErrorCode::kInvalidArgument,
+                "denoise.enabled and frame_pair.two_returns_radius_px > 0 exclude each other (the "
+                "pooled two-returns check needs independent readings): set "
+                "frame_pair.two_returns_radius_px to 0 with denoise");
+  }
   if (frame_pair_enabled && !accuracy_enabled) {
     throw Error(ErrorCode::kInvalidArgument,
                 "frame_pair.enabled needs accuracy.enabled (the combination weights by ΔL)");

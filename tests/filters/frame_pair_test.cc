@@ -249,6 +249,118 @@ TEST(FramePair, InfiniteAmplitudesStayOutOfTheMedian) {
   EXPECT_TRUE(b.flags[80].Has(Flag::kInconsistent));
 }
 
+// A 30 x 20 frame at `f_hz` whose pixels sum their returns in closed form (phasors): columns
+// [0, region_cols) a wall at 2 m plus a second path `gap_m` longer of relative amplitude `eps`
+// (multipath), the other columns a single return at `other_m`. Amplitude per µs 1000 x `contrast`
+// x the sum's magnitude x `gain`; ΔL `sigma` everywhere.
+MetricFrame TwoPathFrame(double f_hz, double contrast, int region_cols, double eps, double gap_m,
+                         double other_m, float sigma, double region_m = 2.0, double gain = 1.0) {
+  constexpr int kW = 30, kH = 20;
+  MetricFrame m;
+  m.radial_distance_m = Image<float>(kW, kH);
+  m.amplitude = Image<float>(kW, kH);
+  m.flags = Image<PixelFlags>(kW, kH);
+  m.delta_l_m = Image<float>(kW, kH, sigma);
+  m.info.modulation_frequency_hz = f_hz;
+  m.info.integration_time_us = 2550.0;
+  const double l = UnambiguousRangeM(f_hz);
+  for (int r = 0; r < kH; ++r) {
+    for (int c = 0; c < kW; ++c) {
+      const bool two = c < region_cols;
+      const double d = two ? region_m : other_m;
+      const double p1 = 2 * kPi * d / l, p2 = 2 * kPi * (d + gap_m) / l;
+      const double re = std::cos(p1) + (two ? eps * std::cos(p2) : 0.0);
+      const double im = std::sin(p1) + (two ? eps * std::sin(p2) : 0.0);
+      double phase = std::atan2(im, re);
+      if (phase < 0) phase += 2 * kPi;
+      m.radial_distance_m(r, c) = static_cast<float>(phase / (2 * kPi) * l);
+      m.amplitude(r, c) = static_cast<float>(1000.0 * contrast * gain * std::hypot(re, im));
+    }
+  }
+  return m;
+}
+
+int CountInconsistent(const MetricFrame& m, int c0, int c1) {
+  int n = 0;
+  for (int r = 0; r < m.height(); ++r) {
+    for (int c = c0; c < c1; ++c) n += m.flags(r, c).Has(Flag::kInconsistent);
+  }
+  return n;
+}
+
+// Columns 0-9 sum a wall at 2 m and a second path 2.9 m longer at 0.2 of its amplitude: they read
+// 2.18 m at 20 MHz and 2.27 m at 17 MHz, and their amplitude ratio is 0.071 above the wall's
+// (ln). With ΔL 4 cm one pixel cannot tell: 3 σ of the ln ratio is 0.132 and the distances'
+// tolerance 4 sqrt(2) ΔL = 0.23 m. A 7x7 window's mean has 1/7 of each σ: 3 σ = 0.019 (floor
+// 2 %: 0.0198) and 0.024 m, which both the ratio (0.071 + 2 ln(2.27 / 2.18) = 0.149) and the
+// distances' difference (0.088 m) exceed. The single surface (columns 10-29) is the pair's
+// median.
+TEST(FramePair, APooledCheckFindsARegionThatSumsTwoPaths) {
+  const MetricFrame a = TwoPathFrame(20e6, 1.0, 10, 0.2, 2.9, 2.0, 0.04f);
+  const MetricFrame b = TwoPathFrame(17e6, 0.9, 10, 0.2, 2.9, 2.0, 0.04f);
+  EXPECT_NEAR(a.radial_distance_m(0, 0), 2.182, 0.002);
+  EXPECT_NEAR(b.radial_distance_m(0, 0), 2.269, 0.002);
+  FramePairOptions per_pixel;
+  per_pixel.two_returns_radius_px = 0;
+  MetricFrame alone = b;
+  CombineFramePair(a, alone, per_pixel);
+  EXPECT_EQ(CountInconsistent(alone, 0, 30), 0);
+  MetricFrame pooled = b;
+  CombineFramePair(a, pooled);  // the default window: 7x7
+  EXPECT_EQ(CountInconsistent(pooled, 0, 10), 200);
+  // The region's combined readings (2.23 m) lie 0.23 m from the wall's, beyond 4 combined σ
+  // (0.226 m): another surface, which the wall's pixels beside it do not pool. Were they pooled,
+  // column 10 (3 of its window's 7 columns in the region) would have 3/7 of both departures,
+  // beyond both bounds.
+  EXPECT_EQ(CountInconsistent(pooled, 10, 30), 0);
+  // Infinite amplitudes (no ratio) in a column of the wall stay out of the median and the sums.
+  MetricFrame a_inf = a, b_inf = b;
+  for (int r = 0; r < 20; ++r) {
+    a_inf.amplitude(r, 20) = std::numeric_limits<float>::infinity();
+    b_inf.amplitude(r, 20) = std::numeric_limits<float>::infinity();
+  }
+  CombineFramePair(a_inf, b_inf);
+  EXPECT_EQ(CountInconsistent(b_inf, 0, 10), 200);
+  EXPECT_EQ(CountInconsistent(b_inf, 10, 30), 0);
+  // A line of multipath one pixel wide pools along itself: column 0's pixels at rows 3-16 pool 7
+  // readings (3 σ: 0.050 and 0.064 m, against 0.149 and 0.088 m). Its end pixels pool 4-6
+  // readings, fewer than the window's side (7), and are left to the per-pixel check.
+  const MetricFrame a1 = TwoPathFrame(20e6, 1.0, 1, 0.2, 2.9, 2.0, 0.04f);
+  MetricFrame b1 = TwoPathFrame(17e6, 0.9, 1, 0.2, 2.9, 2.0, 0.04f);
+  CombineFramePair(a1, b1);
+  for (int r = 0; r < 20; ++r)
+    EXPECT_EQ(b1.flags(r, 0).Has(Flag::kInconsistent), r >= 3 && r <= 16);
+  EXPECT_EQ(CountInconsistent(b1, 1, 30), 0);
+}
+
+// Motion moves the distances alone. Columns 0-9 are a surface that moved from 2.0 to 2.08 m
+// between the frames (single returns), the rest a wall at 3 m that stayed; ΔL 3 cm. The moved
+// pixels' amplitude fell by (2.0 / 2.08)², as one surface's does: ln ratio 0.078 below the
+// wall's, within one pixel's 3 σ (0.099), and their distances differ by 0.08 m, within 4
+// combined σ (0.17 m). A 7x7 window's mean of the distances' difference departs (3 σ: 0.018 m),
+// but corrected for the distance the amplitude ratio is the wall's: not flagged. A moved
+// surface whose amplitude did not fall contradicts one return (corrected ratio 2 ln(2.08 / 2) =
+// 0.078 against 3 σ = 0.014, floor 0.0198): flagged.
+TEST(FramePair, APooledCheckLeavesMotionAlone) {
+  const MetricFrame a = TwoPathFrame(20e6, 1.0, 10, 0.0, 0.0, 3.0, 0.03f, 2.0);
+  const double fall = (2.0 / 2.08) * (2.0 / 2.08);
+  MetricFrame b = TwoPathFrame(17e6, 0.9, 10, 0.0, 0.0, 3.0, 0.03f, 2.08);
+  for (int r = 0; r < b.height(); ++r) {
+    for (int c = 0; c < 10; ++c) b.amplitude(r, c) *= static_cast<float>(fall);
+  }
+  CombineFramePair(a, b);
+  EXPECT_EQ(CountInconsistent(b, 0, 30), 0);
+  MetricFrame bright = TwoPathFrame(17e6, 0.9, 10, 0.0, 0.0, 3.0, 0.03f, 2.08);
+  FramePairOptions per_pixel;
+  per_pixel.two_returns_radius_px = 0;
+  MetricFrame bright_alone = bright;
+  CombineFramePair(a, bright_alone, per_pixel);
+  EXPECT_EQ(CountInconsistent(bright_alone, 0, 30), 0);
+  CombineFramePair(a, bright);
+  EXPECT_EQ(CountInconsistent(bright, 0, 10), 200);
+  EXPECT_EQ(CountInconsistent(bright, 10, 30), 0);
+}
+
 TEST(FramePair, HdrTakesTheOtherExposureWhereOneClippedAndWeightsBySigma) {
   // Long exposure (previous): σ 1 cm; short exposure (current): σ 3 cm, 2 cm further off.
   // Weights 1/σ²: (3.00 / 1e-4 + 3.02 / 9e-4) / (1/1e-4 + 1/9e-4) = 3.002 m.
@@ -358,6 +470,11 @@ TEST(FramePair, BadInputIsAClearError) {
     EXPECT_THROW(FramePairCombiner{r}, Error) << bad;
     r = {};
     r.min_amplitude_tolerance = bad > 1000 ? 1.5 : bad;
+    EXPECT_THROW(FramePairCombiner{r}, Error) << bad;
+  }
+  for (int bad : {-1, FramePairOptions::kMaxTwoReturnsRadiusPx + 1}) {
+    FramePairOptions r;
+    r.two_returns_radius_px = bad;
     EXPECT_THROW(FramePairCombiner{r}, Error) << bad;
   }
   WrapCheckOptions w;

@@ -87,6 +87,18 @@ void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.denoise.support_sigma, b.denoise.support_sigma);
   EXPECT_EQ(a.denoise.max_step_m, b.denoise.max_step_m);
   EXPECT_EQ(a.denoise.fit_plane, b.denoise.fit_plane);
+  EXPECT_EQ(a.frame_pair_enabled, b.frame_pair_enabled);
+  EXPECT_EQ(a.alternate_modulation_frequency_hz, b.alternate_modulation_frequency_hz);
+  EXPECT_EQ(a.hdr_exposure_ratio, b.hdr_exposure_ratio);
+  EXPECT_EQ(a.frame_pair.max_range_m, b.frame_pair.max_range_m);
+  EXPECT_EQ(a.frame_pair.max_disagreement_sigma, b.frame_pair.max_disagreement_sigma);
+  EXPECT_EQ(a.frame_pair.min_tolerance_m, b.frame_pair.min_tolerance_m);
+  EXPECT_EQ(a.frame_pair.max_amplitude_ratio, b.frame_pair.max_amplitude_ratio);
+  EXPECT_EQ(a.frame_pair.max_amplitude_disagreement_sigma,
+            b.frame_pair.max_amplitude_disagreement_sigma);
+  EXPECT_EQ(a.frame_pair.min_amplitude_tolerance, b.frame_pair.min_amplitude_tolerance);
+  EXPECT_EQ(a.frame_pair.max_motion_m, b.frame_pair.max_motion_m);
+  EXPECT_EQ(a.frame_pair.two_returns_radius_px, b.frame_pair.two_returns_radius_px);
   EXPECT_EQ(a.smoothing_enabled, b.smoothing_enabled);
   EXPECT_EQ(a.smoothing.kind, b.smoothing.kind);
   EXPECT_EQ(a.smoothing.radius_px, b.smoothing.radius_px);
@@ -177,6 +189,16 @@ PipelineOptions Unusual() {
   o.denoise.support_sigma = 2.5;
   o.denoise.max_step_m = 0.2;
   o.denoise.fit_plane = true;
+  o.frame_pair_enabled = true;
+  o.alternate_modulation_frequency_hz = 17e6;
+  o.frame_pair.max_range_m = 40.0;
+  o.frame_pair.max_disagreement_sigma = 3.5;
+  o.frame_pair.min_tolerance_m = 0.02;
+  o.frame_pair.max_amplitude_ratio = 1.5;
+  o.frame_pair.max_amplitude_disagreement_sigma = 2.5;
+  o.frame_pair.min_amplitude_tolerance = 0.03;
+  o.frame_pair.max_motion_m = 0.1;
+  o.frame_pair.two_returns_radius_px = 2;
   o.smoothing_enabled = true;
   o.smoothing.kind = SpatialFilterKind::kBilateral;
   o.smoothing.radius_px = 2;
@@ -226,6 +248,7 @@ TEST(PipelineConfigTest, TheDenoiseFlagRoundTrips) {
   o.prediction_enabled = false;
   o.uncertainty.judge_combination = false;
   o.denoise_enabled = true;
+  o.frame_pair.two_returns_radius_px = 0;  // the pooled check excludes the denoising too
   const PipelineOptions back = ParsePipelineConfig(PipelineConfigToYaml(o), "denoised");
   ExpectSameOptions(o, back);
   EXPECT_TRUE(back.denoise_enabled);

@@ -800,12 +800,25 @@ TEST(PipelineSimTest, ThePredictionJudgesTheDrawAndTheCombinationLowersTheError)
   PipelineOptions unread;
   unread.prediction_enabled = true;
   unread.prediction_combine = false;
+  // Denoised readings are not independent: the frame pair's pooled check refuses them (HDR
+  // pairs, which it does not check, and a radius of 0 are accepted).
+  PipelineOptions pooled_denoised;
+  pooled_denoised.denoise_enabled = true;
+  pooled_denoised.frame_pair_enabled = true;
+  PipelineOptions hdr_denoised = pooled_denoised;
+  hdr_denoised.hdr_exposure_ratio = 2.0;
+  EXPECT_NO_THROW(Pipeline(hdr_denoised, TinyCamera()));
+  PipelineOptions per_pixel_denoised = pooled_denoised;
+  per_pixel_denoised.frame_pair.two_returns_radius_px = 0;
+  EXPECT_NO_THROW(Pipeline(per_pixel_denoised, TinyCamera()));
   for (const auto& [options, text] :
        {std::pair{no_sigma, "prediction.enabled needs accuracy.enabled"},
         std::pair{not_combined,
                   "judge_combination needs prediction.enabled and prediction.combine"},
         std::pair{with_denoise, "prediction.enabled and denoise.enabled exclude each other"},
-        std::pair{unread, "nothing would read the prediction"}}) {
+        std::pair{unread, "nothing would read the prediction"},
+        std::pair{pooled_denoised,
+                  "denoise.enabled and frame_pair.two_returns_radius_px > 0 exclude each other"}}) {
     try {
       Pipeline refused(options, TinyCamera());
       ADD_FAILURE() << text << ": accepted";

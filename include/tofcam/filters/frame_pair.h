@@ -71,6 +71,28 @@ struct FramePairOptions {
   /// takes a wrong wrap count unless its amplitude change flags it. Measured in `tofcam
   /// experiment beyond` (docs/beyond.md).
   double max_motion_m = 0.25;
+  /// Two frequencies only: radius, px, of the window over which the two-returns check also
+  /// pools its evidence, [0, kMaxTwoReturnsRadiusPx]; 0 = per pixel only. Multipath sums the
+  /// same two paths over whole regions, so a region's amplitude ratio and the difference of its
+  /// two unwrapped distances are off by about the same in every pixel: within one pixel's noise,
+  /// but many σ of a window's inverse-variance mean. A pixel is then also kInconsistent when,
+  /// over the window's pixels on its own surface (unwrapped distances within
+  /// `max_disagreement_sigma` combined ΔL, floor `min_tolerance_m`), **both** means depart beyond
+  /// `max_amplitude_disagreement_sigma` of their σ:
+  ///  - the log amplitude ratio, corrected for each pixel's change of distance between the
+  ///    frames (amplitude ∝ 1/d²) and less the median of that over the frame (floor
+  ///    `min_amplitude_tolerance`);
+  ///  - the two distances' difference (floor `min_tolerance_m`).
+  /// Motion moves the distances alone; in-camera scattering's residue and a contrast that varies
+  /// over the image move the ratio alone. Pixels whose distances disagree beyond motion, whose
+  /// wrap count is ambiguous or whose amplitude moved do not contribute; a pixel whose window
+  /// holds fewer than 2 x radius + 1 contributing readings (no region) is left to the per-pixel
+  /// check. The means assume
+  /// independent readings: denoised ones (PipelineOptions::denoise) share their neighbours',
+  /// and the pipeline refuses the two together. Measured in `tofcam experiment beyond`
+  /// (docs/beyond.md, "Multipath found over regions").
+  int two_returns_radius_px = 3;
+  static constexpr int kMaxTwoReturnsRadiusPx = 5;
 
   void Validate() const;
 };
