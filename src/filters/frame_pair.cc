@@ -65,9 +65,9 @@ TOFCAM_HOT_LOOP void WrapSearch(std::size_t n, const float* __restrict d1s,
   }
 }
 
-// ln(b / a) for positive a, b: as 2 atanh(u), u = (b - a) / (b + a), by its series where b and a
-// differ by less than about 20 % (error below 2 |u|^7 / 7 < 3e-8: the distances of a pair
-// differ by motion or noise, a few %), by std::log elsewhere.
+// ln(b / a) for positive a, b: as 2 atanh(u), u = (b - a) / (b + a), by its series to u^5 where
+// b and a differ by less than about 20 % (|u| < 0.1: the omitted terms sum to less than 3e-8;
+// the distances of a pair differ by motion or noise, a few %), by std::log elsewhere.
 double LogRatio(double b, double a) {
   const double u = (b - a) / (b + a);
   if (!(std::abs(u) < 0.1)) return std::log(b / a);
@@ -109,15 +109,22 @@ struct PooledInputs {
     const std::size_t r = i / static_cast<std::size_t>(width), c = i % width;
     return (r + radius) * static_cast<std::size_t>(stride) + c + radius;
   }
+  // Records a contributing pixel unless a value or weight is not finite in float (ΔL of 0 or
+  // inf, a variance below about 1e-38): such a pixel neither contributes nor is judged.
   void Record(std::size_t i, double b, double sigma_b, double r, double r_variance, double gap,
               double gap_variance) {
+    constexpr double kMax = std::numeric_limits<float>::max();
+    const double s2 = sigma_b * sigma_b, rw = 1.0 / r_variance, gw = 1.0 / gap_variance;
+    for (const double v : {b, s2, rw, r * rw, gw, gap * gw}) {
+      if (!(std::abs(v) <= kMax)) return;
+    }
     const std::size_t p = At(i);
     distance[p] = static_cast<float>(b);
-    sigma2[p] = static_cast<float>(sigma_b * sigma_b);
-    ratio_w[p] = static_cast<float>(1.0 / r_variance);
-    ratio_wr[p] = static_cast<float>(r / r_variance);
-    gap_w[p] = static_cast<float>(1.0 / gap_variance);
-    gap_wg[p] = static_cast<float>(gap / gap_variance);
+    sigma2[p] = static_cast<float>(s2);
+    ratio_w[p] = static_cast<float>(rw);
+    ratio_wr[p] = static_cast<float>(r * rw);
+    gap_w[p] = static_cast<float>(gw);
+    gap_wg[p] = static_cast<float>(gap * gw);
     ratios.push_back(r);
   }
 };
@@ -199,10 +206,13 @@ TOFCAM_HOT_LOOP_WIDE void PooledRowSums(int n, int radius, std::ptrdiff_t pw, co
 // own surface; the ratio is taken less the contributors' median (the camera's contrast ratio of
 // the two frequencies, as in the per-pixel check).
 void PooledTwoReturnsCheck(int w, int h, const FramePairOptions& options, double log_floor,
-                           PooledInputs& in, Image<PixelFlags>& flags) {
+                           double fallback_median, PooledInputs& in, MetricFrame& current) {
+  if (w <= 0 || h <= 0) return;
+  // Too few contributors to tell the camera's contrast ratio: the per-pixel check's reference.
   const double median = in.ratios.size() >= kMinPixelsForMedian
                             ? filters_internal::KthSmallest(in.ratios, in.ratios.size() / 2)
-                            : 0.0;
+                            : fallback_median;
+  Image<PixelFlags>& flags = current.flags;
   const int radius = in.radius;
   const auto k2 =
       static_cast<float>(options.max_disagreement_sigma * options.max_disagreement_sigma);
@@ -236,7 +246,13 @@ void PooledTwoReturnsCheck(int w, int h, const FramePairOptions& options, double
       const bool ratio_departs = std::abs(ratio_mean) > std::max(k / std::sqrt(ratio_w), log_floor);
       const bool gap_departs =
           std::abs(sum_gs[c] / gap_w) > std::max(k / std::sqrt(gap_w), options.min_tolerance_m);
-      if (ratio_departs && gap_departs) flags[i] |= Flag::kInconsistent;
+      if (ratio_departs && gap_departs) {
+        // As every pixel the pair flags with two frequencies: its own reading, unwrapped, with
+        // its own ΔL, not the average of two readings that sum two returns.
+        flags[i] |= Flag::kInconsistent;
+        current.radial_distance_m[i] = in.distance[centre + c];
+        current.delta_l_m[i] = std::sqrt(in.sigma2[centre + c]);
+      }
     }
   }
 }
@@ -444,7 +460,7 @@ void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
     if (sum > 0.0) current.delta_l_m[i] = static_cast<float>(1.0 / std::sqrt(sum));
   }
   if (pooled) {
-    PooledTwoReturnsCheck(w, h, options, log_floor, pooled_inputs, current.flags);
+    PooledTwoReturnsCheck(w, h, options, log_floor, median_log_ratio, pooled_inputs, current);
   }
 }
 

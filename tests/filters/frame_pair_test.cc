@@ -254,7 +254,8 @@ TEST(FramePair, InfiniteAmplitudesStayOutOfTheMedian) {
 // (multipath), the other columns a single return at `other_m`. Amplitude per µs 1000 x `contrast`
 // x the sum's magnitude x `gain`; ΔL `sigma` everywhere.
 MetricFrame TwoPathFrame(double f_hz, double contrast, int region_cols, double eps, double gap_m,
-                         double other_m, float sigma, double region_m = 2.0, double gain = 1.0) {
+                         double other_m, float sigma, double region_m = 2.0, double gain = 1.0,
+                         int region_first = 0) {
   constexpr int kW = 30, kH = 20;
   MetricFrame m;
   m.radial_distance_m = Image<float>(kW, kH);
@@ -266,7 +267,7 @@ MetricFrame TwoPathFrame(double f_hz, double contrast, int region_cols, double e
   const double l = UnambiguousRangeM(f_hz);
   for (int r = 0; r < kH; ++r) {
     for (int c = 0; c < kW; ++c) {
-      const bool two = c < region_cols;
+      const bool two = c >= region_first && c < region_first + region_cols;
       const double d = two ? region_m : other_m;
       const double p1 = 2 * kPi * d / l, p2 = 2 * kPi * (d + gap_m) / l;
       const double re = std::cos(p1) + (two ? eps * std::cos(p2) : 0.0);
@@ -308,11 +309,50 @@ TEST(FramePair, APooledCheckFindsARegionThatSumsTwoPaths) {
   MetricFrame pooled = b;
   CombineFramePair(a, pooled);  // the default window: 7x7
   EXPECT_EQ(CountInconsistent(pooled, 0, 10), 200);
-  // The region's combined readings (2.23 m) lie 0.23 m from the wall's, beyond 4 combined σ
-  // (0.226 m): another surface, which the wall's pixels beside it do not pool. Were they pooled,
-  // column 10 (3 of its window's 7 columns in the region) would have 3/7 of both departures,
-  // beyond both bounds.
+  // A flagged pixel delivers its current reading, unwrapped, with its own ΔL (not the average).
+  EXPECT_NEAR(pooled.radial_distance_m(0, 0), 2.269, 0.002);
+  EXPECT_FLOAT_EQ(pooled.delta_l_m(0, 0), 0.04f);
+  // The same-surface test compares the current readings: the region's (2.27 m) lie 0.27 m from
+  // the wall's, beyond 4 combined σ (0.226 m), another surface, which the wall's pixels beside
+  // it do not pool. Were they pooled, column 10 (3 of its window's 7 columns in the region) would
+  // have 3/7 of both departures, beyond both bounds.
   EXPECT_EQ(CountInconsistent(pooled, 10, 30), 0);
+  // The same region in columns 20-29, which a row of 30 leaves to the loop's one-pixel tail
+  // (after one block of 16): flagged alike.
+  const MetricFrame a_tail = TwoPathFrame(20e6, 1.0, 10, 0.2, 2.9, 2.0, 0.04f, 2.0, 1.0, 20);
+  MetricFrame b_tail = TwoPathFrame(17e6, 0.9, 10, 0.2, 2.9, 2.0, 0.04f, 2.0, 1.0, 20);
+  CombineFramePair(a_tail, b_tail);
+  EXPECT_EQ(CountInconsistent(b_tail, 20, 30), 200);
+  EXPECT_EQ(CountInconsistent(b_tail, 0, 20), 0);
+  // Frames of other sizes in between (the check's buffers are the thread's) and of no pixels.
+  const MetricFrame small_a = Pixels(20e6, 1.0, 2.0, 0.01f);
+  MetricFrame small_b = Pixels(17e6, 1.0, 2.0, 0.01f);
+  CombineFramePair(small_a, small_b);
+  EXPECT_FALSE(small_b.flags[0].Any(kRejectMask));
+  MetricFrame empty_a = small_a, empty_b = small_b;
+  for (MetricFrame* f : {&empty_a, &empty_b}) {
+    f->radial_distance_m = Image<float>(0, 4);
+    f->amplitude = Image<float>(0, 4);
+    f->delta_l_m = Image<float>(0, 4);
+    f->flags = Image<PixelFlags>(0, 4);
+  }
+  EXPECT_NO_THROW(CombineFramePair(empty_a, empty_b));
+  // A ΔL whose weights do not fit a float (1e-25 m) or that is infinite leaves that pixel out
+  // of the pools; the others are judged as before. (The infinite one is flagged by the
+  // per-pixel wrap search: every pair of wrap counts agrees within an infinite tolerance.)
+  MetricFrame a_odd = a, b_odd = b;
+  for (MetricFrame* f : {&a_odd, &b_odd}) {
+    f->delta_l_m(5, 25) = 1e-25f;
+    f->delta_l_m(6, 25) = std::numeric_limits<float>::infinity();
+  }
+  CombineFramePair(a_odd, b_odd);
+  EXPECT_EQ(CountInconsistent(b_odd, 0, 10), 200);
+  EXPECT_TRUE(b_odd.flags(6, 25).Has(Flag::kInconsistent));
+  EXPECT_EQ(CountInconsistent(b_odd, 10, 30), 1);
+  MetricFrame again = b;
+  CombineFramePair(a, again);
+  EXPECT_EQ(CountInconsistent(again, 0, 10), 200);
+  EXPECT_EQ(CountInconsistent(again, 10, 30), 0);
   // Infinite amplitudes (no ratio) in a column of the wall stay out of the median and the sums.
   MetricFrame a_inf = a, b_inf = b;
   for (int r = 0; r < 20; ++r) {

@@ -18,7 +18,9 @@
 /// two frequencies, when a second pair of wrap counts also agrees within the tolerance (noise too
 /// large to tell the pairs apart: ambiguous) or its two amplitudes disagree beyond their noise
 /// (`max_amplitude_disagreement_sigma`: it sums two returns, a mixed pixel or two-path
-/// multipath).
+/// multipath), or when that evidence and the distances' difference, pooled over a window of its
+/// own surface, both depart from one return's (`two_returns_radius_px`: multipath over a
+/// region).
 ///
 /// Single-frequency wrap detection (WrapCheckFilter) is the fallback where only one frequency
 /// exists.
@@ -92,6 +94,7 @@ struct FramePairOptions {
   /// and the pipeline refuses the two together. Measured in `tofcam experiment beyond`
   /// (docs/beyond.md, "Multipath found over regions").
   int two_returns_radius_px = 3;
+  /// Largest `two_returns_radius_px`, px: an 11x11 window.
   static constexpr int kMaxTwoReturnsRadiusPx = 5;
 
   void Validate() const;
@@ -101,7 +104,8 @@ struct FramePairOptions {
 /// (the pipeline's accuracy stage). Pixels with a reject flag in one frame take the other's
 /// value and flags minus that frame's reject bits (HDR: a clipped pixel is replaced) — except
 /// with two frequencies, where one frame alone cannot be unwrapped: such pixels keep their
-/// flags and get kInconsistent. Throws Error(kInvalidArgument) for bad options, empty ΔL,
+/// flags and get kInconsistent. With two frequencies a kInconsistent pixel delivers its current
+/// reading unwrapped, with its own ΔL. Throws Error(kInvalidArgument) for bad options, empty ΔL,
 /// frames of different sizes, or a modulation frequency outside (0, 1 GHz].
 void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
                       const FramePairOptions& options = {});
