@@ -621,8 +621,8 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << Pct(metric(0, "beyond_kept_right")) << ", two frequencies "
        << Pct(metric(5, "beyond_kept_right")) << ", the neighbours' prediction (below) "
        << Pct(metric(15, "beyond_kept_right"))
-       << " (the rest of the surfaces beyond L are rejected, mostly dim far ones whose noise "
-          "leaves the wrap count ambiguous). Smoothing the kept distances after the filters (same "
+       << " (the rest of the surfaces beyond L are rejected; docs/beyond.md says which). "
+          "Smoothing the kept distances after the filters (same "
           "rejections, less noise in "
           "what is kept) raises the F1 to "
        << F(metric(7, "f1"), 3) << " (bad among kept " << Pct(metric(5, "kept_bad_fraction"))

@@ -109,11 +109,13 @@ struct PooledInputs {
     const std::size_t r = i / static_cast<std::size_t>(width), c = i % width;
     return (r + radius) * static_cast<std::size_t>(stride) + c + radius;
   }
-  // Records a contributing pixel unless a value or weight is not finite in float (ΔL of 0 or
-  // inf, a variance below about 1e-38): such a pixel neither contributes nor is judged.
+  // Records a contributing pixel unless a value or weight is too large for the float sums of a
+  // window of up to 11x11 (a ΔL below about 1e-18 m in both frames): such a pixel neither
+  // contributes nor is judged.
   void Record(std::size_t i, double b, double sigma_b, double r, double r_variance, double gap,
               double gap_variance) {
-    constexpr double kMax = std::numeric_limits<float>::max();
+    constexpr int kSide = 2 * FramePairOptions::kMaxTwoReturnsRadiusPx + 1;
+    constexpr double kMax = std::numeric_limits<float>::max() / (kSide * kSide);
     const double s2 = sigma_b * sigma_b, rw = 1.0 / r_variance, gw = 1.0 / gap_variance;
     for (const double v : {b, s2, rw, r * rw, gw, gap * gw}) {
       if (!(std::abs(v) <= kMax)) return;

@@ -337,12 +337,15 @@ TEST(FramePair, APooledCheckFindsARegionThatSumsTwoPaths) {
     f->flags = Image<PixelFlags>(0, 4);
   }
   EXPECT_NO_THROW(CombineFramePair(empty_a, empty_b));
-  // A ΔL whose weights do not fit a float (1e-25 m) or that is infinite leaves that pixel out
-  // of the pools; the others are judged as before. (The infinite one is flagged by the
-  // per-pixel wrap search: every pair of wrap counts agrees within an infinite tolerance.)
+  // A ΔL whose weights would overflow the float sums (1e-25 m, inside the region) leaves that
+  // pixel out of the pools, so its neighbours are judged as before (were it pooled, the sums of
+  // the 49 windows that hold it would be inf or NaN and none of them flagged); the per-pixel
+  // check flags it itself (its ratio departs beyond a σ of 1e-25). An infinite ΔL on the wall
+  // is flagged by the per-pixel wrap search: every pair of wrap counts agrees within an
+  // infinite tolerance.
   MetricFrame a_odd = a, b_odd = b;
   for (MetricFrame* f : {&a_odd, &b_odd}) {
-    f->delta_l_m(5, 25) = 1e-25f;
+    f->delta_l_m(5, 5) = 1e-25f;
     f->delta_l_m(6, 25) = std::numeric_limits<float>::infinity();
   }
   CombineFramePair(a_odd, b_odd);
@@ -399,6 +402,32 @@ TEST(FramePair, APooledCheckLeavesMotionAlone) {
   CombineFramePair(a, bright);
   EXPECT_EQ(CountInconsistent(bright, 0, 10), 200);
   EXPECT_EQ(CountInconsistent(bright, 10, 30), 0);
+}
+
+// With fewer than 64 contributors the pooled ratio's reference is the per-pixel check's median.
+// A 30x20 pair at contrast 0.9 whose pixels all jumped 1 m between the frames (2 -> 3 m: beyond
+// the motion bound, so kInconsistent, and not contributors) except a block of 8x5 that moved
+// 8 cm with its amplitude falling as 1/d²: the per-pixel median is ln 0.9 (all 600 pixels), and
+// the block's motion-corrected ratio is ln 0.9 too, so it departs from nothing, while its
+// distances' difference (0.08 m) departs by many σ. Had the reference been 0 (equal contrast),
+// the block's ratio would depart by 0.105 and the whole block would be flagged.
+TEST(FramePair, APooledCheckWithFewContributorsTakesThePairsMedian) {
+  const MetricFrame a = TwoPathFrame(20e6, 1.0, 0, 0.0, 0.0, 2.0, 0.03f);
+  MetricFrame b = TwoPathFrame(17e6, 0.9, 0, 0.0, 0.0, 3.0, 0.03f);
+  const double fall = (2.0 / 2.08) * (2.0 / 2.08);
+  for (int r = 0; r < 5; ++r) {
+    for (int c = 0; c < 8; ++c) {
+      b.radial_distance_m(r, c) = 2.08f;
+      b.amplitude(r, c) = static_cast<float>(900.0 * fall);
+    }
+  }
+  CombineFramePair(a, b);
+  int block = 0;
+  for (int r = 0; r < 5; ++r) {
+    for (int c = 0; c < 8; ++c) block += b.flags(r, c).Has(Flag::kInconsistent);
+  }
+  EXPECT_EQ(block, 0);
+  EXPECT_EQ(CountInconsistent(b, 0, 30), 600 - 40);  // the jumps
 }
 
 TEST(FramePair, HdrTakesTheOtherExposureWhereOneClippedAndWeightsBySigma) {

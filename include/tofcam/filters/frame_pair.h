@@ -92,7 +92,9 @@ struct FramePairOptions {
   /// check. The means assume
   /// independent readings: denoised ones (PipelineOptions::denoise) share their neighbours',
   /// and the pipeline refuses the two together. Measured in `tofcam experiment beyond`
-  /// (docs/beyond.md, "Multipath found over regions").
+  /// (docs/beyond.md, "Multipath found over regions"). With fewer than 64 contributors the
+  /// ratio's reference is the per-pixel check's median; a pixel whose weights would overflow
+  /// the float sums (ΔL below about 1e-18 m) neither contributes nor is judged.
   int two_returns_radius_px = 3;
   /// Largest `two_returns_radius_px`, px: an 11x11 window.
   static constexpr int kMaxTwoReturnsRadiusPx = 5;
@@ -104,9 +106,9 @@ struct FramePairOptions {
 /// (the pipeline's accuracy stage). Pixels with a reject flag in one frame take the other's
 /// value and flags minus that frame's reject bits (HDR: a clipped pixel is replaced) — except
 /// with two frequencies, where one frame alone cannot be unwrapped: such pixels keep their
-/// flags and get kInconsistent. With two frequencies a kInconsistent pixel delivers its current
-/// reading unwrapped, with its own ΔL. Throws Error(kInvalidArgument) for bad options, empty ΔL,
-/// frames of different sizes, or a modulation frequency outside (0, 1 GHz].
+/// flags and get kInconsistent. With two frequencies a kInconsistent pixel good in both frames
+/// delivers its current reading unwrapped, with its own ΔL. Throws Error(kInvalidArgument) for bad
+/// options, empty ΔL, frames of different sizes, or a modulation frequency outside (0, 1 GHz].
 void CombineFramePair(const MetricFrame& previous, MetricFrame& current,
                       const FramePairOptions& options = {});
 

@@ -59,7 +59,8 @@ struct NeighbourPredictionOptions {
   /// passes with probability 0.9985 (24 pairs, 6.3e-5 each beyond 4σ), and still 0.83 when ΔL
   /// underestimates the noise by 1.5x (as eq. 2 with the SR-2's noise calibration does on a
   /// dim wall: docs/beyond.md), while a depth step of many σ fails it. Measured in `tofcam
-  /// experiment beyond`: F1 0.903 at 3, 0.910 at 4 and 5 (docs/beyond.md).
+  /// experiment beyond`: F1 0.903 at 3, 0.910 at 4 and 5 (docs/beyond.md; before the frame
+  /// pair's pooled two-returns check, with which it is 0.907 at 4).
   double max_disagreement_sigma = 4.0;
   /// Fewest usable pairs a window needs, the fallback windows' too; [1, 2 R (R + 1)] (the
   /// largest window's pairs). A 3x3 window has 4 pairs and a 5x5 12: above those, that window
