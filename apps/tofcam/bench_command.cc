@@ -484,6 +484,17 @@ std::vector<Stage> MakeStages() {
                  UncertaintyFilterInto(ws.ready[k], {}, ws.raised, &ws.predictions[k]);
                  Sink(ws, ws.raised.data());
                }});
+  // Issue 18's best row's uncertainty: the prediction, own-side edge terms and edge pixels
+  // unmixed (their amplitudes read as well: 4 more bytes a pixel).
+  s.push_back({"filter: uncertainty, prediction + own-side edges + unmixing",
+               4 + 4 + 4 + 2 + 2 + 8, 1, true, [](Workspace& ws, std::size_t i) {
+                 const std::size_t k = i % ws.ready.size();
+                 UncertaintyOptions o;
+                 o.extrapolate_edges = true;
+                 o.unmix_edges = true;
+                 UncertaintyFilterInto(ws.ready[k], o, ws.raised, &ws.predictions[k]);
+                 Sink(ws, ws.raised.data());
+               }});
   // Five frames at -60..60 degrees into the 180-degree cloud and panorama; per input frame
   // (traffic: PanTraffic).
   s.push_back({std::string(kPanStage), 0, 5, true, [](Workspace& ws, std::size_t) {

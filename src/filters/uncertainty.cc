@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -11,6 +12,7 @@
 #include "hot_loop.h"
 #include "simd.h"
 #include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
 
 #if defined(TOFCAM_AVX512_FORMS)
 #include <immintrin.h>
@@ -214,7 +216,7 @@ constexpr float kSmallest = 1e-10f, kLargest = 1e15f;
 // Whether the float form covers these options: m² >= 1e-6 (above), max² normal, and the edge
 // term's fraction 0 or not so small that fraction x step underflows.
 bool FloatFormCovers(const UncertaintyOptions& o) {
-  return !o.extrapolate_edges && o.min_jump_sigma >= 1e-3 && o.max_uncertainty_m >= 1e-10 &&
+  return !o.extrapolate_edges && !o.unmix_edges && o.min_jump_sigma >= 1e-3 && o.max_uncertainty_m >= 1e-10 &&
          (o.edge_fraction == 0.0 || o.edge_fraction >= 1e-6);
 }
 
@@ -543,6 +545,82 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     const double si = frame.delta_l_m[i], sa = frame.delta_l_m[a], sb = frame.delta_l_m[b];
     return dev > options.min_jump_sigma * std::sqrt(si * si + 4 * sa * sa + sb * sb) ? dev : 0.0;
   };
+  // UncertaintyOptions::unmix_edges. A pixel's phasor is amplitude x e^(i 4π f d / c); an edge
+  // pixel's is the mix t z_a + (1 - t) z_j of its own side's neighbour a and the neighbour j
+  // across the step, t its own side's share of the return, by least squares.
+  const bool amplitudes = frame.amplitude.SameSize(w, h);
+  const double wavenumber = 4.0 * kPi * frame.info.modulation_frequency_hz / kSpeedOfLightMPerS;
+  const auto phasor = [&](std::size_t q) {
+    return std::polar(static_cast<double>(frame.amplitude[q]),
+                      wavenumber * static_cast<double>(frame.radial_distance_m[q]));
+  };
+  // The other side may be a pixel a filter rejected as too noisy or inconsistent: a dim far
+  // surface behind a bright near one reads noise in distance, but its phasor is still small,
+  // and that is what the mix needs. Not a clipped or invalid one (its amplitude is not a
+  // measurement), except an amplitude of exactly 0, no return: phasor 0, distance unknown.
+  const auto no_return = [&](std::size_t q) {
+    return frame.flags[q].Has(Flag::kInvalid) && frame.amplitude[q] == 0.0f;
+  };
+  const auto readable = [&](std::size_t q) {
+    return !frame.flags[q].Any(static_cast<std::uint16_t>(Flag::kInvalid) |
+                               static_cast<std::uint16_t>(Flag::kSaturated)) &&
+           std::isfinite(frame.radial_distance_m[q]) && std::isfinite(frame.delta_l_m[q]) &&
+           std::isfinite(frame.amplitude[q]) && frame.amplitude[q] > 0.0f;
+  };
+  // t for pixel i between a and j; NaN where i's or a's amplitude is not positive and finite or
+  // the two sides' phasors lie within min_jump_sigma of t's noise apart (each phasor's σ is its
+  // amplitude x its phase σ, ΔL x the wavenumber; a no-return side has none).
+  const auto own_share = [&](std::size_t i, std::size_t a, std::size_t j, bool none_back) {
+    constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+    for (const std::size_t q : {i, a}) {
+      const float amp = frame.amplitude[q];
+      if (!(std::isfinite(amp) && amp > 0.0f)) return kNaN;
+    }
+    const std::complex<double> zi = phasor(i), za = phasor(a);
+    const std::complex<double> zj = none_back ? std::complex<double>() : phasor(j);
+    const std::complex<double> across = za - zj;
+    const double n2 = std::norm(across);
+    const auto var = [&](std::size_t q) {
+      const double sigma = static_cast<double>(frame.amplitude[q]) * frame.delta_l_m[q] * wavenumber;
+      return sigma * sigma;
+    };
+    const double noise2 = var(i) + var(a) + (none_back ? 0.0 : var(j));
+    const double m2 = options.min_jump_sigma * options.min_jump_sigma;
+    if (!std::isfinite(n2) || !(n2 > m2 * noise2)) return kNaN;
+    return std::real((zi - zj) * std::conj(across)) / n2;
+  };
+  // The unmixing's edge term of usable pixel i at (r, c): the largest step to a 4-neighbour j
+  // across which i's own side, the opposite neighbour a, has under half of i's return (+inf when
+  // j returned nothing); 0 when there is none. a must be usable and read within half the step
+  // of i (else i lies between the two sides, a flying pixel, for the other edge terms to
+  // judge); a usable j must pass the edge test (a step beyond min_jump_sigma combined σ,
+  // compared squared).
+  const auto unmix_term = [&](int r, int c, std::size_t i) {
+    const double m2 = options.min_jump_sigma * options.min_jump_sigma;
+    double term = 0.0;
+    const double di = frame.radial_distance_m[i], si = frame.delta_l_m[i];
+    const int dr[4] = {-1, 1, 0, 0}, dc[4] = {0, 0, -1, 1};
+    for (int k = 0; k < 4; ++k) {
+      const int rj = r + dr[k], cj = c + dc[k], ra = r - dr[k], ca = c - dc[k];
+      if (rj < 0 || rj >= h || cj < 0 || cj >= w || ra < 0 || ra >= h || ca < 0 || ca >= w) {
+        continue;
+      }
+      const std::size_t j = static_cast<std::size_t>(rj) * w + cj;
+      const std::size_t a = static_cast<std::size_t>(ra) * w + ca;
+      // Most neighbours are usable and no edge: that test first.
+      const bool none_back = no_return(j);
+      double step = std::numeric_limits<double>::infinity();
+      if (!none_back) {
+        if (!readable(j)) continue;
+        step = std::abs(frame.radial_distance_m[j] - di);
+        const double sj = frame.delta_l_m[j];
+        if (usable(j) && !(step * step > m2 * (si * si + sj * sj))) continue;
+      }
+      if (!usable(a) || !(std::abs(frame.radial_distance_m[a] - di) <= 0.5 * step)) continue;
+      if (own_share(i, a, j, none_back) < 0.5) term = std::max(term, step);
+    }
+    return term;
+  };
   // The noise term's square: ΔL², or where the neighbours predict the pixel what
   // options.judge_combination asks for.
   // With a prediction, the noise term's square of every pixel in one vectorised pass first.
@@ -558,7 +636,7 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     return prediction == nullptr ? s * s : predicted_noise2[i];
   };
   Image<float> out(w, h, kInf);
-  if (!options.extrapolate_edges && prediction == nullptr) {
+  if (!options.extrapolate_edges && !options.unmix_edges && prediction == nullptr) {
     // Padded rows (one pixel each side; rows outside the image all padding): distances NaN
     // where not usable, ΔL, and the unknown-neighbour mask.
     const std::size_t pw = static_cast<std::size_t>(w) + 2;
@@ -619,6 +697,7 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
         edge = std::max(edge, e);
       }
       if (std::isinf(edge)) continue;  // next to a clipped pixel: unbounded
+      if (options.unmix_edges && amplitudes) edge = std::max(edge, unmix_term(r, c, i));
       out[i] = static_cast<float>(std::sqrt(noise2(i, s) + edge * edge));
     }
   }

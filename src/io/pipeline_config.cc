@@ -119,6 +119,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("min_jump_sigma", o.uncertainty.min_jump_sigma, "steps below are noise, (0, 100]");
     v.Field("extrapolate_edges", o.uncertainty.extrapolate_edges,
             "edge term: how far the pixel leaves its own side's line, not a part of the step");
+    v.Field("unmix_edges", o.uncertainty.unmix_edges,
+            "an edge pixel whose own side has under half its return takes the whole step");
     v.Field("unknown_neighbour_flags", FlagMask{o.uncertainty.unknown_neighbour_flags},
             "a pixel next to one with any of these flags is flagged");
     v.Field("judge_combination", o.uncertainty.judge_combination,

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <complex>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -10,6 +11,7 @@
 
 #include "core/avx512_forms.h"  // internal: the portable / AVX-512 switch (src/core)
 #include "tofcam/core/error.h"
+#include "tofcam/core/units.h"
 
 namespace tofcam {
 namespace {
@@ -125,6 +127,139 @@ TEST(Uncertainty, ExtrapolatedEdgesChargeOnlyWhatLeavesTheOwnSurface) {
   EXPECT_NEAR(ComputeUncertainty(m, on)[2], 0.01, 1e-6);
   m = Row({1.0f, 1.0f, 1.1f, 2.0f}, 0.01f);
   EXPECT_NEAR(ComputeUncertainty(m, on)[2], std::sqrt(0.0001 + 0.01), 1e-6);
+}
+
+// A mixed pixel as the sensor forms it: the phasor sum of two returns, share `own` from a surface
+// at `near_m` whose full pixel returns amplitude `near_amp`, the rest from one at `far_m`
+// returning `far_amp`, at 20 MHz. Its reading is the sum's phase as a distance in [0, L), its
+// amplitude the sum's magnitude.
+struct Mix {
+  float distance_m;
+  float amplitude;
+};
+Mix MixedPixel(double own, double near_m, double near_amp, double far_m, double far_amp) {
+  const double k = 4.0 * kPi * 20e6 / kSpeedOfLightMPerS;  // rad per m of distance
+  const std::complex<double> z = own * std::polar(near_amp, k * near_m) +
+                                 (1.0 - own) * std::polar(far_amp, k * far_m);
+  double phase = std::arg(z);
+  if (phase < 0.0) phase += 2.0 * kPi;
+  return {static_cast<float>(phase / k), static_cast<float>(std::abs(z))};
+}
+
+// Row 1.0, 1.0 | mixed | 4.0, 4.0 m: the near surface returns 1000, the far one 40 (a bright
+// object in front of a dim wall). Distance σ 1 cm near, 5 cm far; edge_fraction 0 so that only
+// the unmixing charges an edge.
+MetricFrame EdgeRow(const Mix& mixed) {
+  MetricFrame m = Row({1.0f, 1.0f, mixed.distance_m, 4.0f, 4.0f}, 0.01f);
+  m.info.modulation_frequency_hz = 20e6;
+  m.amplitude[2] = mixed.amplitude;
+  m.amplitude[3] = m.amplitude[4] = 40.0f;
+  m.delta_l_m[3] = m.delta_l_m[4] = 0.05f;
+  return m;
+}
+
+UncertaintyOptions UnmixOnly() {
+  UncertaintyOptions o;
+  o.edge_fraction = 0.0;
+  o.unmix_edges = true;
+  return o;
+}
+
+TEST(Uncertainty, UnmixingChargesAPixelMostlyOnTheOtherSideTheWholeStep) {
+  // 30 % of the pixel on the near object, 70 % on the wall: it reads the object (300 against 28
+  // of amplitude, 7 cm towards the wall), but its centre lies on the wall, 2.93 m further.
+  const Mix mostly_far = MixedPixel(0.3, 1.0, 1000.0, 4.0, 40.0);
+  ASSERT_NEAR(mostly_far.distance_m, 1.07, 0.01);
+  MetricFrame m = EdgeRow(mostly_far);
+  Image<float> u = ComputeUncertainty(m, UnmixOnly());
+  const double step = 4.0 - mostly_far.distance_m;
+  EXPECT_NEAR(u[2], std::sqrt(0.0001 + step * step), 1e-5);
+  // The pure pixels on either side keep their noise: each one's own side has all its return.
+  for (const int i : {0, 1, 3, 4}) EXPECT_NEAR(u[i], m.delta_l_m[i], 1e-7) << i;
+  EXPECT_TRUE(UncertaintyFilter(m, UnmixOnly())[2].Has(Flag::kLowConfidence));
+  // Off, the same pixel is charged nothing (edge_fraction 0).
+  UncertaintyOptions off = UnmixOnly();
+  off.unmix_edges = false;
+  EXPECT_NEAR(ComputeUncertainty(m, off)[2], 0.01, 1e-7);
+
+  // 70 % on the object: its centre is on the object, which it reads; no charge.
+  m = EdgeRow(MixedPixel(0.7, 1.0, 1000.0, 4.0, 40.0));
+  u = ComputeUncertainty(m, UnmixOnly());
+  EXPECT_NEAR(u[2], 0.01, 1e-7);
+  EXPECT_FALSE(UncertaintyFilter(m, UnmixOnly())[2].Has(Flag::kLowConfidence));
+
+  // The same down a column.
+  MetricFrame col = Blank(1, 5);
+  col.info.modulation_frequency_hz = 20e6;
+  m = EdgeRow(mostly_far);
+  for (int i = 0; i < 5; ++i) {
+    col.radial_distance_m[i] = m.radial_distance_m[i];
+    col.amplitude[i] = m.amplitude[i];
+    col.delta_l_m[i] = m.delta_l_m[i];
+  }
+  EXPECT_NEAR(ComputeUncertainty(col, UnmixOnly())[2], std::sqrt(0.0001 + step * step), 1e-5);
+}
+
+TEST(Uncertainty, UnmixingTakesADimRejectedOrSilentOtherSide) {
+  // The wall is so dim that its pixels read noise (here 3.5 and 0.4 m, ΔL 1 m) and the accuracy
+  // filter rejected them; their phasors are still small, and the pixel's share is about its
+  // amplitude against its own side's: 300 / 1000.
+  const Mix mostly_far = MixedPixel(0.3, 1.0, 1000.0, 4.0, 8.0);
+  MetricFrame m = EdgeRow(mostly_far);
+  m.radial_distance_m[3] = 3.5f;
+  m.radial_distance_m[4] = 0.4f;
+  m.amplitude[3] = m.amplitude[4] = 8.0f;
+  m.delta_l_m[3] = m.delta_l_m[4] = 1.0f;
+  m.flags[3] = m.flags[4] = PixelFlags(Flag::kHighDeltaL);
+  const double step = 3.5 - mostly_far.distance_m;
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], std::sqrt(0.0001 + step * step), 1e-5);
+  // Had the filters kept such a neighbour, its 2.4 m step would be within 3 sqrt(1² + 0.01²) =
+  // 3 m of noise: no edge, no charge.
+  m.flags[3] = PixelFlags();
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
+  // No return at all (amplitude 0, invalid): the step is unknown, u infinite.
+  m.flags[3] = PixelFlags(Flag::kInvalid);
+  m.amplitude[3] = 0.0f;
+  m.radial_distance_m[3] = std::numeric_limits<float>::quiet_NaN();
+  m.radial_distance_m[2] = 1.0f;
+  m.amplitude[2] = 300.0f;
+  EXPECT_TRUE(std::isinf(ComputeUncertainty(m, UnmixOnly())[2]));
+  m.amplitude[2] = 700.0f;  // 70 % on the object
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
+  // A clipped neighbour's amplitude is no measurement: not unmixed.
+  m.amplitude[2] = 300.0f;
+  m.flags[3] = PixelFlags(Flag::kSaturated);
+  m.amplitude[3] = 0.0f;
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
+}
+
+TEST(Uncertainty, UnmixingLeavesOneSurfaceAndMissingAmplitudesAlone) {
+  // One surface whose brightness falls across the pixels (1000, 650, 300): the middle pixel is
+  // half way in the mix of its neighbours, but its 2 cm step to the right is noise (below
+  // 3 sqrt(2) σ = 4.2 cm), so no edge; nor when it is darker than either (200, share < 0).
+  MetricFrame m = Row({1.0f, 1.0f, 1.02f}, 0.01f);
+  m.info.modulation_frequency_hz = 20e6;
+  m.amplitude[1] = 650.0f;
+  m.amplitude[2] = 300.0f;
+  for (const float middle : {650.0f, 200.0f}) {
+    m.amplitude[1] = middle;
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[i], 0.01, 1e-7);
+  }
+  // Two sides whose phasors lie within 3 σ of t's noise: no decision. With ΔL 2 m on the near
+  // side, a phasor's σ is 1000 x 2 m x 0.84 rad/m = 1680 there, against about 1000 between the
+  // two sides.
+  const Mix mostly_far = MixedPixel(0.3, 1.0, 1000.0, 4.0, 40.0);
+  m = EdgeRow(mostly_far);
+  for (const int i : {0, 1, 2}) m.delta_l_m[i] = 2.0f;  // phasor σ 1000 x 2 m x 0.84 rad/m
+  m.flags[3] = m.flags[4] = PixelFlags(Flag::kHighDeltaL);
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 2.0, 1e-6);
+  // Without an amplitude image, or with a NaN amplitude, nothing is unmixed.
+  m = EdgeRow(mostly_far);
+  m.amplitude = Image<float>();
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
+  m = EdgeRow(mostly_far);
+  m.amplitude[2] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
 }
 
 TEST(Uncertainty, ExtrapolatedEdgesWorkDownColumnsAndFallBackNextToRejectedPixels) {

@@ -75,6 +75,7 @@ void ExpectSameOptions(const PipelineOptions& a, const PipelineOptions& b) {
   EXPECT_EQ(a.uncertainty.edge_fraction, b.uncertainty.edge_fraction);
   EXPECT_EQ(a.uncertainty.min_jump_sigma, b.uncertainty.min_jump_sigma);
   EXPECT_EQ(a.uncertainty.extrapolate_edges, b.uncertainty.extrapolate_edges);
+  EXPECT_EQ(a.uncertainty.unmix_edges, b.uncertainty.unmix_edges);
   EXPECT_EQ(a.uncertainty.unknown_neighbour_flags, b.uncertainty.unknown_neighbour_flags);
   EXPECT_EQ(a.uncertainty.judge_combination, b.uncertainty.judge_combination);
   EXPECT_EQ(a.prediction_enabled, b.prediction_enabled);
@@ -177,6 +178,7 @@ PipelineOptions Unusual() {
   o.uncertainty.edge_fraction = 0.25;
   o.uncertainty.min_jump_sigma = 2.5;
   o.uncertainty.extrapolate_edges = true;
+  o.uncertainty.unmix_edges = true;
   o.uncertainty.unknown_neighbour_flags = PixelFlags(Flag::kSaturated).bits();
   o.uncertainty.judge_combination = true;
   o.prediction_enabled = true;

@@ -47,6 +47,16 @@ struct UncertaintyOptions {
   /// linearly over three or more pixels looks like a slope and gets no edge term. Measured:
   /// docs/beyond.md.
   bool extrapolate_edges = false;
+  /// Unmix edge pixels: for a step to neighbour j, the pixel's phasor (amplitude, and phase
+  /// 4π f d / c at the frame's modulation frequency) is taken as the mix t z_a + (1 - t) z_j of
+  /// its own side's neighbour a (opposite j, reading within half the step of the pixel) and of
+  /// j, least squares in t. A pixel whose own side has less than half its return (t < 0.5) has
+  /// most of its footprint, and for a straight edge its centre, on j's surface, although it reads
+  /// its own side's (a brighter surface outweighs a larger area): its edge term becomes the whole
+  /// step. Otherwise the term is as the other options say. Needs the frame's amplitude; pixels
+  /// whose amplitude is not finite and positive, or whose neighbours' are not, are not unmixed.
+  /// Measured: docs/beyond.md ("Mixed pixels unmixed").
+  bool unmix_edges = false;
   /// A pixel with a 4-neighbour carrying any of these flags gets u = +inf (see the file
   /// comment); 0 = none (the default). Measured (`tofcam experiment beyond`, two frequencies):
   /// kSaturated | kInconsistent lowers the kept pixels' RMSE within L from 237 to 218 mm but
