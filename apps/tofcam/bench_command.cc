@@ -486,8 +486,8 @@ std::vector<Stage> MakeStages() {
                }});
   // Issue 18's best row's uncertainty: the prediction, own-side edge terms and edge pixels
   // unmixed (their amplitudes read as well: 4 more bytes a pixel).
-  s.push_back({"filter: uncertainty, prediction + own-side edges + unmixing",
-               4 + 4 + 4 + 2 + 2 + 8, 1, true, [](Workspace& ws, std::size_t i) {
+  s.push_back({"filter: uncertainty, prediction + own-side edges + unmixing", 4 + 4 + 4 + 2 + 2 + 8,
+               1, true, [](Workspace& ws, std::size_t i) {
                  const std::size_t k = i % ws.ready.size();
                  UncertaintyOptions o;
                  o.extrapolate_edges = true;

@@ -216,8 +216,8 @@ constexpr float kSmallest = 1e-10f, kLargest = 1e15f;
 // Whether the float form covers these options: m² >= 1e-6 (above), max² normal, and the edge
 // term's fraction 0 or not so small that fraction x step underflows.
 bool FloatFormCovers(const UncertaintyOptions& o) {
-  return !o.extrapolate_edges && !o.unmix_edges && o.min_jump_sigma >= 1e-3 && o.max_uncertainty_m >= 1e-10 &&
-         (o.edge_fraction == 0.0 || o.edge_fraction >= 1e-6);
+  return !o.extrapolate_edges && !o.unmix_edges && o.min_jump_sigma >= 1e-3 &&
+         o.max_uncertainty_m >= 1e-10 && (o.edge_fraction == 0.0 || o.edge_fraction >= 1e-6);
 }
 
 TOFCAM_AVX512_INLINE __mmask16 Lanes16(int n) {
@@ -581,7 +581,8 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     const std::complex<double> across = za - zj;
     const double n2 = std::norm(across);
     const auto var = [&](std::size_t q) {
-      const double sigma = static_cast<double>(frame.amplitude[q]) * frame.delta_l_m[q] * wavenumber;
+      const double sigma =
+          static_cast<double>(frame.amplitude[q]) * frame.delta_l_m[q] * wavenumber;
       return sigma * sigma;
     };
     const double noise2 = var(i) + var(a) + (none_back ? 0.0 : var(j));

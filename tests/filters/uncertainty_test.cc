@@ -139,8 +139,8 @@ struct Mix {
 };
 Mix MixedPixel(double own, double near_m, double near_amp, double far_m, double far_amp) {
   const double k = 4.0 * kPi * 20e6 / kSpeedOfLightMPerS;  // rad per m of distance
-  const std::complex<double> z = own * std::polar(near_amp, k * near_m) +
-                                 (1.0 - own) * std::polar(far_amp, k * far_m);
+  const std::complex<double> z =
+      own * std::polar(near_amp, k * near_m) + (1.0 - own) * std::polar(far_amp, k * far_m);
   double phase = std::arg(z);
   if (phase < 0.0) phase += 2.0 * kPi;
   return {static_cast<float>(phase / k), static_cast<float>(std::abs(z))};
