@@ -213,8 +213,9 @@ constexpr float kFloatBand = 1e-5f;
 // do not have on a usable pixel), and their neighbours, take the exact tests.
 constexpr float kSmallest = 1e-10f, kLargest = 1e15f;
 
-// Whether the float form covers these options: m² >= 1e-6 (above), max² normal, and the edge
-// term's fraction 0 or not so small that fraction x step underflows.
+// Whether the float form covers these options: neither extrapolated nor unmixed edges (the
+// per-pixel form alone has them), m² >= 1e-6 (above), max² normal, and the edge term's fraction
+// 0 or not so small that fraction x step underflows.
 bool FloatFormCovers(const UncertaintyOptions& o) {
   return !o.extrapolate_edges && !o.unmix_edges && o.min_jump_sigma >= 1e-3 &&
          o.max_uncertainty_m >= 1e-10 && (o.edge_fraction == 0.0 || o.edge_fraction >= 1e-6);
@@ -547,37 +548,36 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
   };
   // UncertaintyOptions::unmix_edges. A pixel's phasor is amplitude x e^(i 4π f d / c); an edge
   // pixel's is the mix t z_a + (1 - t) z_j of its own side's neighbour a and the neighbour j
-  // across the step, t its own side's share of the return, by least squares.
-  const bool amplitudes = frame.amplitude.SameSize(w, h);
+  // across the step, t the share of its area on its own side, by least squares.
   const double wavenumber = 4.0 * kPi * frame.info.modulation_frequency_hz / kSpeedOfLightMPerS;
+  const bool can_unmix = options.unmix_edges && frame.amplitude.SameSize(w, h) &&
+                         std::isfinite(wavenumber) && wavenumber > 0.0;
   const auto phasor = [&](std::size_t q) {
     return std::polar(static_cast<double>(frame.amplitude[q]),
                       wavenumber * static_cast<double>(frame.radial_distance_m[q]));
   };
   // The other side may be a pixel a filter rejected as too noisy or inconsistent: a dim far
   // surface behind a bright near one reads noise in distance, but its phasor is still small,
-  // and that is what the mix needs. Not a clipped or invalid one (its amplitude is not a
-  // measurement), except an amplitude of exactly 0, no return: phasor 0, distance unknown.
-  const auto no_return = [&](std::size_t q) {
-    return frame.flags[q].Has(Flag::kInvalid) && frame.amplitude[q] == 0.0f;
-  };
+  // and that is what the mix needs. Not a clipped or invalid one: its amplitude is no
+  // measurement (importers also mark unknown amplitudes invalid).
   const auto readable = [&](std::size_t q) {
     return !frame.flags[q].Any(static_cast<std::uint16_t>(Flag::kInvalid) |
                                static_cast<std::uint16_t>(Flag::kSaturated)) &&
            std::isfinite(frame.radial_distance_m[q]) && std::isfinite(frame.delta_l_m[q]) &&
            std::isfinite(frame.amplitude[q]) && frame.amplitude[q] > 0.0f;
   };
-  // t for pixel i between a and j; NaN where i's or a's amplitude is not positive and finite or
-  // the two sides' phasors lie within min_jump_sigma of t's noise apart (each phasor's σ is its
-  // amplitude x its phase σ, ΔL x the wavenumber; a no-return side has none).
-  const auto own_share = [&](std::size_t i, std::size_t a, std::size_t j, bool none_back) {
+  // t for pixel i between a and j (j readable); NaN where i's or a's amplitude is not positive
+  // and finite or the two sides' phasors lie within min_jump_sigma of t's noise apart (each
+  // phasor's σ is its amplitude x its phase σ, ΔL x the wavenumber; after the frame pair ΔL is
+  // the two frames' combined σ while the phasor is the current frame's, so the test is up to
+  // sqrt 2 lenient there).
+  const auto own_share = [&](std::size_t i, std::size_t a, std::size_t j) {
     constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
     for (const std::size_t q : {i, a}) {
       const float amp = frame.amplitude[q];
       if (!(std::isfinite(amp) && amp > 0.0f)) return kNaN;
     }
-    const std::complex<double> zi = phasor(i), za = phasor(a);
-    const std::complex<double> zj = none_back ? std::complex<double>() : phasor(j);
+    const std::complex<double> zi = phasor(i), za = phasor(a), zj = phasor(j);
     const std::complex<double> across = za - zj;
     const double n2 = std::norm(across);
     const auto var = [&](std::size_t q) {
@@ -585,17 +585,17 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
           static_cast<double>(frame.amplitude[q]) * frame.delta_l_m[q] * wavenumber;
       return sigma * sigma;
     };
-    const double noise2 = var(i) + var(a) + (none_back ? 0.0 : var(j));
+    const double noise2 = var(i) + var(a) + var(j);
     const double m2 = options.min_jump_sigma * options.min_jump_sigma;
     if (!std::isfinite(n2) || !(n2 > m2 * noise2)) return kNaN;
     return std::real((zi - zj) * std::conj(across)) / n2;
   };
-  // The unmixing's edge term of usable pixel i at (r, c): the largest step to a 4-neighbour j
-  // across which i's own side, the opposite neighbour a, has under half of i's return (+inf when
-  // j returned nothing); 0 when there is none. a must be usable and read within half the step
-  // of i (else i lies between the two sides, a flying pixel, for the other edge terms to
-  // judge); a usable j must pass the edge test (a step beyond min_jump_sigma combined σ,
-  // compared squared).
+  // The unmixing's edge term of usable pixel i at (r, c): the largest step to a readable
+  // 4-neighbour j across which less than half of i's area lies on its own side, the opposite
+  // neighbour a; 0 when there is none. a must be usable and read within half the step of i
+  // (else i lies between the two sides, a flying pixel, for the other edge terms to judge); a
+  // usable j must pass the edge test (a step beyond min_jump_sigma combined σ, compared
+  // squared).
   const auto unmix_term = [&](int r, int c, std::size_t i) {
     const double m2 = options.min_jump_sigma * options.min_jump_sigma;
     double term = 0.0;
@@ -608,17 +608,12 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
       }
       const std::size_t j = static_cast<std::size_t>(rj) * w + cj;
       const std::size_t a = static_cast<std::size_t>(ra) * w + ca;
-      // Most neighbours are usable and no edge: that test first.
-      const bool none_back = no_return(j);
-      double step = std::numeric_limits<double>::infinity();
-      if (!none_back) {
-        if (!readable(j)) continue;
-        step = std::abs(frame.radial_distance_m[j] - di);
-        const double sj = frame.delta_l_m[j];
-        if (usable(j) && !(step * step > m2 * (si * si + sj * sj))) continue;
-      }
+      if (!readable(j)) continue;
+      const double step = std::abs(frame.radial_distance_m[j] - di);
+      const double sj = frame.delta_l_m[j];
+      if (usable(j) && !(step * step > m2 * (si * si + sj * sj))) continue;
       if (!usable(a) || !(std::abs(frame.radial_distance_m[a] - di) <= 0.5 * step)) continue;
-      if (own_share(i, a, j, none_back) < 0.5) term = std::max(term, step);
+      if (own_share(i, a, j) < 0.5) term = std::max(term, step);
     }
     return term;
   };
@@ -698,7 +693,7 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
         edge = std::max(edge, e);
       }
       if (std::isinf(edge)) continue;  // next to a clipped pixel: unbounded
-      if (options.unmix_edges && amplitudes) edge = std::max(edge, unmix_term(r, c, i));
+      if (can_unmix) edge = std::max(edge, unmix_term(r, c, i));
       out[i] = static_cast<float>(std::sqrt(noise2(i, s) + edge * edge));
     }
   }

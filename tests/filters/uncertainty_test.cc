@@ -200,7 +200,7 @@ TEST(Uncertainty, UnmixingChargesAPixelMostlyOnTheOtherSideTheWholeStep) {
   EXPECT_NEAR(ComputeUncertainty(col, UnmixOnly())[2], std::sqrt(0.0001 + step * step), 1e-5);
 }
 
-TEST(Uncertainty, UnmixingTakesADimRejectedOrSilentOtherSide) {
+TEST(Uncertainty, UnmixingTakesADimRejectedOtherSide) {
   // The wall is so dim that its pixels read noise (here 3.5 and 0.4 m, ΔL 1 m) and the accuracy
   // filter rejected them; their phasors are still small, and the pixel's share is about its
   // amplitude against its own side's: 300 / 1000.
@@ -213,30 +213,28 @@ TEST(Uncertainty, UnmixingTakesADimRejectedOrSilentOtherSide) {
   m.flags[3] = m.flags[4] = PixelFlags(Flag::kHighDeltaL);
   const double step = 3.5 - mostly_far.distance_m;
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], std::sqrt(0.0001 + step * step), 1e-5);
-  // Had the filters kept such a neighbour, its 2.4 m step would be within 3 sqrt(1² + 0.01²) =
+  // Had the filters kept such a neighbour, its 2.5 m step would be within 3 sqrt(1² + 0.01²) =
   // 3 m of noise: no edge, no charge.
   m.flags[3] = PixelFlags();
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
-  // No return at all (amplitude 0, invalid): the step is unknown, u infinite.
-  m.flags[3] = PixelFlags(Flag::kInvalid);
-  m.amplitude[3] = 0.0f;
-  m.radial_distance_m[3] = std::numeric_limits<float>::quiet_NaN();
-  m.radial_distance_m[2] = 1.0f;
-  m.amplitude[2] = 300.0f;
-  EXPECT_TRUE(std::isinf(ComputeUncertainty(m, UnmixOnly())[2]));
-  m.amplitude[2] = 700.0f;  // 70 % on the object
-  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
-  // A clipped neighbour's amplitude is no measurement: not unmixed.
-  m.amplitude[2] = 300.0f;
-  m.flags[3] = PixelFlags(Flag::kSaturated);
-  m.amplitude[3] = 0.0f;
-  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
+  // A clipped or invalid neighbour's amplitude is no measurement: not unmixed, although its
+  // reading (the wall's own phasor, 4 m and 8) gives a share below one half when rejected for
+  // noise alone.
+  m.radial_distance_m[3] = 4.0f;
+  m.amplitude[3] = 8.0f;
+  m.delta_l_m[3] = 0.05f;
+  m.flags[3] = PixelFlags(Flag::kHighDeltaL);
+  ASSERT_GT(ComputeUncertainty(m, UnmixOnly())[2], 1.0);
+  for (const Flag f : {Flag::kSaturated, Flag::kInvalid}) {
+    m.flags[3] = PixelFlags(f);
+    EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
+  }
 }
 
 TEST(Uncertainty, UnmixingLeavesOneSurfaceAndMissingAmplitudesAlone) {
-  // One surface whose brightness falls across the pixels (1000, 650, 300): the middle pixel is
-  // half way in the mix of its neighbours, but its 2 cm step to the right is noise (below
-  // 3 sqrt(2) σ = 4.2 cm), so no edge; nor when it is darker than either (200, share < 0).
+  // One surface whose brightness falls across the pixels (1000, then 650 or 200, then 300): the
+  // middle pixel's 2 cm step to the right is noise (below 3 sqrt(2) σ = 4.2 cm), so no edge,
+  // although at 200 its share between its neighbours is -0.14 (at 650 it is 0.5: half way).
   MetricFrame m = Row({1.0f, 1.0f, 1.02f}, 0.01f);
   m.info.modulation_frequency_hz = 20e6;
   m.amplitude[1] = 650.0f;
@@ -253,13 +251,23 @@ TEST(Uncertainty, UnmixingLeavesOneSurfaceAndMissingAmplitudesAlone) {
   for (const int i : {0, 1, 2}) m.delta_l_m[i] = 2.0f;  // phasor σ 1000 x 2 m x 0.84 rad/m
   m.flags[3] = m.flags[4] = PixelFlags(Flag::kHighDeltaL);
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 2.0, 1e-6);
-  // Without an amplitude image, or with a NaN amplitude, nothing is unmixed.
+  // Without an amplitude image, with the pixel's amplitude 0, infinite or NaN, or without a
+  // usable modulation frequency, nothing is unmixed.
   m = EdgeRow(mostly_far);
   m.amplitude = Image<float>();
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
-  m = EdgeRow(mostly_far);
-  m.amplitude[2] = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
+  for (const float bad :
+       {0.0f, std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()}) {
+    m = EdgeRow(mostly_far);
+    m.amplitude[2] = bad;
+    EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7) << bad;
+  }
+  for (const double f :
+       {0.0, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN()}) {
+    m = EdgeRow(mostly_far);
+    m.info.modulation_frequency_hz = f;
+    EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7) << f;
+  }
 }
 
 TEST(Uncertainty, ExtrapolatedEdgesWorkDownColumnsAndFallBackNextToRejectedPixels) {

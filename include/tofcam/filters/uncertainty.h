@@ -10,7 +10,8 @@
 /// with `jump` the largest distance step to a usable 4-neighbour when that step exceeds
 /// `min_jump_sigma` of the two pixels' combined ΔL (smaller steps are noise or slope, not an
 /// edge); with `extrapolate_edges` the edge term is instead how far the pixel leaves its own
-/// side's surface. Pixels with a reject flag (saturated, inconsistent between frequencies, ...) or
+/// side's surface, and with `unmix_edges` a pixel whose area lies mostly across a step is charged
+/// the whole step. Pixels with a reject flag (saturated, inconsistent between frequencies, ...) or
 /// without ΔL have u = +inf. Optionally (`unknown_neighbour_flags`) so have pixels next to a
 /// clipped one or to one whose two combined frames disagree: such a neighbour sees something else
 /// (far brighter and usually much nearer, or that moved) at a distance nobody knows, so the jump
@@ -49,13 +50,17 @@ struct UncertaintyOptions {
   bool extrapolate_edges = false;
   /// Unmix edge pixels: for a step to neighbour j, the pixel's phasor (amplitude, and phase
   /// 4π f d / c at the frame's modulation frequency) is taken as the mix t z_a + (1 - t) z_j of
-  /// its own side's neighbour a (opposite j, reading within half the step of the pixel) and of
-  /// j, least squares in t. A pixel whose own side has less than half its return (t < 0.5) has
-  /// most of its footprint, and for a straight edge its centre, on j's surface, although it reads
-  /// its own side's (a brighter surface outweighs a larger area): its edge term becomes the whole
-  /// step. Otherwise the term is as the other options say. Needs the frame's amplitude; pixels
-  /// whose amplitude is not finite and positive, or whose neighbours' are not, are not unmixed.
-  /// Measured: docs/beyond.md ("Mixed pixels unmixed").
+  /// its own side's neighbour a (opposite j, usable, reading within half the step of the pixel)
+  /// and of j, least squares in t: t is the share of the pixel's area (footprint) on its own
+  /// side. A pixel with t < 0.5 has most of its area, and for a straight edge its centre, on j's
+  /// surface, although it reads its own side's distance (a bright near surface outweighs a dim
+  /// far one's larger area): its edge term becomes the whole step. Otherwise the term is as the
+  /// other options say. j may be a pixel a filter rejected (noisy, inconsistent), not a clipped
+  /// or invalid one; a usable j must pass the edge test above (on one surface t ≈ 0.5 means
+  /// nothing); the two sides' phasors must lie more than min_jump_sigma σ of t's noise apart.
+  /// Needs the frame's amplitude and a finite positive modulation frequency, else nothing is
+  /// unmixed; pixels whose own or a's amplitude is not finite and positive are not unmixed.
+  /// Per-pixel form only. Measured: docs/beyond.md ("Mixed pixels unmixed").
   bool unmix_edges = false;
   /// A pixel with a 4-neighbour carrying any of these flags gets u = +inf (see the file
   /// comment); 0 = none (the default). Measured (`tofcam experiment beyond`, two frequencies):
@@ -90,8 +95,9 @@ struct UncertaintyOptions {
 /// Same, into `out`: resized to the frame's size when it differs, then every pixel overwritten
 /// (kLowConfidence or nothing), so a per-frame loop allocates no output image (with the default
 /// options, no prediction and an AVX-512 CPU nothing at all; otherwise the u image of
-/// ComputeUncertainty is still made per call, and with a prediction or `extrapolate_edges` it
-/// is computed pixel by pixel: about 16 ns a pixel against 0.9, docs/benchmarks.md). `out` must not
+/// ComputeUncertainty is still made per call, and with a prediction, `extrapolate_edges` or
+/// `unmix_edges` it is computed pixel by pixel: about 16 ns a pixel against 0.9 with a
+/// prediction, 37-41 ns with all three, docs/benchmarks.md). `out` must not
 /// be one of the frame's channels. Throws as ComputeUncertainty, before `out` is touched.
 void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
                            Image<PixelFlags>& out, const NeighbourPrediction* prediction = nullptr);
