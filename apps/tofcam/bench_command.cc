@@ -484,8 +484,16 @@ std::vector<Stage> MakeStages() {
                  UncertaintyFilterInto(ws.ready[k], {}, ws.raised, &ws.predictions[k]);
                  Sink(ws, ws.raised.data());
                }});
-  // Issue 18's best row's uncertainty: the prediction, own-side edge terms and edge pixels
-  // unmixed (their amplitudes read as well: 4 more bytes a pixel).
+  // Issue 18's best rows' uncertainty: the prediction and own-side edge terms, then with edge
+  // pixels unmixed as well (their amplitudes read too: 4 more bytes a pixel).
+  s.push_back({"filter: uncertainty, prediction + own-side edges", 4 + 4 + 2 + 2 + 8, 1, true,
+               [](Workspace& ws, std::size_t i) {
+                 const std::size_t k = i % ws.ready.size();
+                 UncertaintyOptions o;
+                 o.extrapolate_edges = true;
+                 UncertaintyFilterInto(ws.ready[k], o, ws.raised, &ws.predictions[k]);
+                 Sink(ws, ws.raised.data());
+               }});
   s.push_back({"filter: uncertainty, prediction + own-side edges + unmixing", 4 + 4 + 4 + 2 + 2 + 8,
                1, true, [](Workspace& ws, std::size_t i) {
                  const std::size_t k = i % ws.ready.size();

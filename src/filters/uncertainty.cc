@@ -594,10 +594,9 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
   // 4-neighbour j across which less than half of i's area lies on its own side, the opposite
   // neighbour a; 0 when there is none. a must be usable and read within half the step of i
   // (else i lies between the two sides, a flying pixel, for the other edge terms to judge); a
-  // usable j must pass the edge test (a step beyond min_jump_sigma combined σ, compared
-  // squared).
+  // usable j must pass the edge test (a step beyond min_jump_sigma combined σ, the same test as
+  // the other edge terms', so that the caller can skip pixels without such a neighbour).
   const auto unmix_term = [&](int r, int c, std::size_t i) {
-    const double m2 = options.min_jump_sigma * options.min_jump_sigma;
     double term = 0.0;
     const double di = frame.radial_distance_m[i], si = frame.delta_l_m[i];
     const int dr[4] = {-1, 1, 0, 0}, dc[4] = {0, 0, -1, 1};
@@ -611,7 +610,7 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
       if (!readable(j)) continue;
       const double step = std::abs(frame.radial_distance_m[j] - di);
       const double sj = frame.delta_l_m[j];
-      if (usable(j) && !(step * step > m2 * (si * si + sj * sj))) continue;
+      if (usable(j) && !(step > options.min_jump_sigma * std::sqrt(si * si + sj * sj))) continue;
       if (!usable(a) || !(std::abs(frame.radial_distance_m[a] - di) <= 0.5 * step)) continue;
       if (own_share(i, a, j) < 0.5) term = std::max(term, step);
     }
@@ -669,6 +668,9 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
       if (!usable(i)) continue;
       const double d = frame.radial_distance_m[i], s = frame.delta_l_m[i];
       double edge = 0.0;  // m
+      // Whether a neighbour could be the other side of an unmixed edge (a rejected one, or an
+      // edge step): the unmixing looks at no other pixel, and most pixels have none.
+      bool unmix_candidate = false;
       const int dr[4] = {-1, 1, 0, 0}, dc[4] = {0, 0, -1, 1};
       for (int k = 0; k < 4; ++k) {
         const int rr = r + dr[k], cc = c + dc[k];
@@ -678,11 +680,15 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
           edge = std::numeric_limits<double>::infinity();
           break;
         }
-        if (!usable(j)) continue;
+        if (!usable(j)) {
+          unmix_candidate = true;
+          continue;
+        }
         const double dj = frame.radial_distance_m[j];
         const double step = std::abs(dj - d);
         const double sj = frame.delta_l_m[j];
         if (!(step > options.min_jump_sigma * std::sqrt(s * s + sj * sj))) continue;
+        unmix_candidate = true;
         double e = options.edge_fraction * step;
         if (options.extrapolate_edges) {
           // The step's other side is the neighbour's business; this pixel is wrong only as far
@@ -693,7 +699,7 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
         edge = std::max(edge, e);
       }
       if (std::isinf(edge)) continue;  // next to a clipped pixel: unbounded
-      if (can_unmix) edge = std::max(edge, unmix_term(r, c, i));
+      if (can_unmix && unmix_candidate) edge = std::max(edge, unmix_term(r, c, i));
       out[i] = static_cast<float>(std::sqrt(noise2(i, s) + edge * edge));
     }
   }

@@ -180,6 +180,27 @@ def test_the_neighbours_prediction_judges_residuals_and_combines_kept_pixels():
                         {"uncertainty": {"judge_combination": True}})
 
 
+def test_unmixing_edge_pixels_only_adds_low_confidence_flags():
+    # `uncertainty.unmix_edges` from Python: the same frame of the pavilion (a poster and pillars
+    # in front of far walls; same seed, fixed exposure) with and without it. The unmixing only
+    # adds an edge term (the uncertainty is the larger of the two), so every pixel flagged
+    # without it is flagged with it, and the option must reach the stage: some edge pixel whose
+    # area lies mostly across a step is flagged only with it.
+    def run(unmix):
+        cam = tofcam.SimulatedCamera("pavilion", seed=5)
+        options = {"accuracy": {"scale": 0.165}, "controller": {"enabled": False},
+                   "uncertainty": {"enabled": True, "extrapolate_edges": True,
+                                   "unmix_edges": unmix}}
+        pipe = tofcam.Pipeline(cam.info, options)
+        cam.integration_time_register = 8
+        res = pipe.process(cam.grab())
+        return (res.frame.flags & int(tofcam.Flag.LOW_CONFIDENCE)) != 0
+
+    without, with_unmixing = run(False), run(True)
+    assert not (without & ~with_unmixing).any()
+    assert (with_unmixing & ~without).sum() > 0
+
+
 def test_out_of_another_layout_is_refused_not_freed_under_its_views():
     # Filling `out` from a frame of another size or with other channels would replace buffers
     # that views of it still point into (a use-after-free that crashed the interpreter).

@@ -97,7 +97,7 @@ struct UncertaintyOptions {
 /// options, no prediction and an AVX-512 CPU nothing at all; otherwise the u image of
 /// ComputeUncertainty is still made per call, and with a prediction, `extrapolate_edges` or
 /// `unmix_edges` it is computed pixel by pixel: about 16 ns a pixel against 0.9 with a
-/// prediction, 37-41 ns with all three, docs/benchmarks.md). `out` must not
+/// prediction, 22-23 ns with all three, docs/benchmarks.md). `out` must not
 /// be one of the frame's channels. Throws as ComputeUncertainty, before `out` is touched.
 void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
                            Image<PixelFlags>& out, const NeighbourPrediction* prediction = nullptr);
