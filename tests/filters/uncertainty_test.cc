@@ -174,7 +174,8 @@ TEST(Uncertainty, UnmixingChargesAPixelMostlyOnTheOtherSideTheWholeStep) {
   Image<float> u = ComputeUncertainty(m, UnmixOnly());
   const double step = 4.0 - mostly_far.distance_m;
   EXPECT_NEAR(u[2], std::sqrt(0.0001 + step * step), 1e-5);
-  // The pure pixels on either side keep their noise: each one's own side has all its return.
+  // The pure pixels on either side keep their noise: each one has all its area on its own side
+  // (t = 1).
   for (const int i : {0, 1, 3, 4}) EXPECT_NEAR(u[i], m.delta_l_m[i], 1e-7) << i;
   EXPECT_TRUE(UncertaintyFilter(m, UnmixOnly())[2].Has(Flag::kLowConfidence));
   // Off, the same pixel is charged nothing (edge_fraction 0).
@@ -229,6 +230,10 @@ TEST(Uncertainty, UnmixingTakesADimRejectedOtherSide) {
     m.flags[3] = PixelFlags(f);
     EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
   }
+  // Nor one whose amplitude is 0 (rejected as too dark): a phasor of 0 would give t = 0.28.
+  m.flags[3] = PixelFlags(Flag::kLowAmplitude);
+  m.amplitude[3] = 0.0f;
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);
 }
 
 TEST(Uncertainty, UnmixingLeavesOneSurfaceAndMissingAmplitudesAlone) {
@@ -243,6 +248,22 @@ TEST(Uncertainty, UnmixingLeavesOneSurfaceAndMissingAmplitudesAlone) {
     m.amplitude[1] = middle;
     for (int i = 0; i < 3; ++i) EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[i], 0.01, 1e-7);
   }
+  // The same row above a rejected pixel (noise: kHighDeltaL) under the middle one, so that the
+  // middle pixel is looked at: towards its right neighbour (2 cm, noise) its share is -0.14, but
+  // that neighbour is usable and its step no edge, so it charges nothing.
+  MetricFrame two = Blank(3, 2);
+  two.info.modulation_frequency_hz = 20e6;
+  for (int r = 0; r < 2; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      two.radial_distance_m(r, c) = c == 2 ? 1.02f : 1.0f;
+      two.delta_l_m(r, c) = 0.01f;
+    }
+  }
+  two.amplitude(0, 1) = 200.0f;
+  two.amplitude(0, 2) = 300.0f;
+  two.flags(1, 1) = PixelFlags(Flag::kHighDeltaL);
+  const Image<float> u_two = ComputeUncertainty(two, UnmixOnly());
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(u_two(0, c), 0.01, 1e-7) << c;
   // Two sides whose phasors lie within 3 σ of t's noise: no decision. With ΔL 2 m on the near
   // side, a phasor's σ is 1000 x 2 m x 0.84 rad/m = 1680 there, against about 1000 between the
   // two sides.
@@ -252,7 +273,9 @@ TEST(Uncertainty, UnmixingLeavesOneSurfaceAndMissingAmplitudesAlone) {
   m.flags[3] = m.flags[4] = PixelFlags(Flag::kHighDeltaL);
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 2.0, 1e-6);
   // Without an amplitude image, with the pixel's amplitude 0, infinite or NaN, or without a
-  // usable modulation frequency, nothing is unmixed.
+  // usable modulation frequency, nothing is unmixed. (The 0 cases pin the guards; with an
+  // infinite or NaN value the phasors' noise test would also fail, and those cases show only
+  // that nothing is charged.)
   m = EdgeRow(mostly_far);
   m.amplitude = Image<float>();
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2], 0.01, 1e-7);

@@ -56,11 +56,11 @@ struct UncertaintyOptions {
   /// surface, although it reads its own side's distance (a bright near surface outweighs a dim
   /// far one's larger area): its edge term becomes the whole step. Otherwise the term is as the
   /// other options say. j may be a pixel a filter rejected (noisy, inconsistent), not a clipped
-  /// or invalid one; a usable j must pass the edge test above (on one surface t ≈ 0.5 means
-  /// nothing); the two sides' phasors must lie more than min_jump_sigma σ of t's noise apart.
-  /// Needs the frame's amplitude and a finite positive modulation frequency, else nothing is
-  /// unmixed; pixels whose own or a's amplitude is not finite and positive are not unmixed.
-  /// Per-pixel form only. Measured: docs/beyond.md ("Mixed pixels unmixed").
+  /// or invalid one or one of amplitude 0; a usable j must pass the edge test above (on one surface
+  /// t ≈ 0.5 means nothing); the two sides' phasors must lie more than min_jump_sigma σ of t's
+  /// noise apart. Needs the frame's amplitude and a finite positive modulation frequency, else
+  /// nothing is unmixed; pixels whose own or a's amplitude is not finite and positive are not
+  /// unmixed. Per-pixel form only. Measured: docs/beyond.md ("Mixed pixels unmixed").
   bool unmix_edges = false;
   /// A pixel with a 4-neighbour carrying any of these flags gets u = +inf (see the file
   /// comment); 0 = none (the default). Measured (`tofcam experiment beyond`, two frequencies):
@@ -97,8 +97,8 @@ struct UncertaintyOptions {
 /// options, no prediction and an AVX-512 CPU nothing at all; otherwise the u image of
 /// ComputeUncertainty is still made per call, and with a prediction, `extrapolate_edges` or
 /// `unmix_edges` it is computed pixel by pixel: about 16 ns a pixel against 0.9 with a
-/// prediction, 22-23 ns with all three, docs/benchmarks.md). `out` must not
-/// be one of the frame's channels. Throws as ComputeUncertainty, before `out` is touched.
+/// prediction, 22-23 ns with all three on frames without rejections, docs/benchmarks.md). `out`
+/// must not be one of the frame's channels. Throws as ComputeUncertainty, before `out` is touched.
 void UncertaintyFilterInto(const MetricFrame& frame, const UncertaintyOptions& options,
                            Image<PixelFlags>& out, const NeighbourPrediction* prediction = nullptr);
 
