@@ -566,11 +566,14 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
            std::isfinite(frame.radial_distance_m[q]) && std::isfinite(frame.delta_l_m[q]) &&
            std::isfinite(frame.amplitude[q]) && frame.amplitude[q] > 0.0f;
   };
-  // t for pixel i between a and j (j readable); NaN where i's or a's amplitude is not positive
-  // and finite or the two sides' phasors lie within min_jump_sigma of t's noise apart (each
-  // phasor's σ is its amplitude x its phase σ, ΔL x the wavenumber; after the frame pair ΔL is
-  // the two frames' combined σ while the phasor is the current frame's, so the test is up to
-  // sqrt 2 lenient there).
+  // t for pixel i between a and j (j readable), less min_jump_sigma times its σ: the share of
+  // i's area on its own side that the phasors show beyond their noise. NaN where i's or a's
+  // amplitude is not positive and finite or the two sides' phasors lie within min_jump_sigma of
+  // t's noise apart. Each phasor's σ (per component) is its amplitude x its phase σ, ΔL x the
+  // wavenumber; after the frame pair ΔL is the two frames' combined σ while the phasor is the
+  // current frame's, so both tests are up to sqrt 2 lenient there. To first order t's variance
+  // is (var_i + t² var_a + (1 - t)² var_j) / |z_a - z_j|²: each phasor's noise projected on the
+  // line between the two sides.
   const auto own_share = [&](std::size_t i, std::size_t a, std::size_t j) {
     constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
     for (const std::size_t q : {i, a}) {
@@ -588,14 +591,21 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     const double noise2 = var(i) + var(a) + var(j);
     const double m2 = options.min_jump_sigma * options.min_jump_sigma;
     if (!std::isfinite(n2) || !(n2 > m2 * noise2)) return kNaN;
-    return std::real((zi - zj) * std::conj(across)) / n2;
+    const double t = std::real((zi - zj) * std::conj(across)) / n2;
+    const double t_var = (var(i) + t * t * var(a) + (1.0 - t) * (1.0 - t) * var(j)) / n2;
+    return t - options.min_jump_sigma * std::sqrt(t_var);
   };
   // The unmixing's edge term of usable pixel i at (r, c): the largest step to a readable
-  // 4-neighbour j across which less than half of i's area lies on its own side, the opposite
-  // neighbour a; 0 when there is none. a must be usable and read within half the step of i
-  // (else i lies between the two sides, a flying pixel, for the other edge terms to judge); a
-  // usable j must pass the edge test (a step beyond min_jump_sigma combined σ, the same test as
-  // the other edge terms', so that the caller can skip pixels without such a neighbour).
+  // 4-neighbour j across which i's area is not shown (beyond min_jump_sigma of the share's σ)
+  // to lie more than half on its own side, the opposite neighbour a; 0 when there is none. Where
+  // the share is 1/2 within its noise, so may be the centre's side: a pixel that reads its own
+  // side is trusted only when most of its area demonstrably lies there. a must be usable and
+  // read within half the step of i (else i lies between the two sides, a flying pixel, for the
+  // other edge terms to judge). A usable j must pass the edge test (a step beyond
+  // min_jump_sigma combined σ, the same test as the other edge terms', so that the caller can
+  // skip pixels without such a neighbour) and leave the line through a and i by as much (σ of
+  // d_j - 2 d_i + d_a): on a slope a pixel's phasor is its neighbours' mean, t = 1/2, which
+  // says nothing of an edge. A rejected j reads noise in distance, so only its phasor counts.
   const auto unmix_term = [&](int r, int c, std::size_t i) {
     double term = 0.0;
     const double di = frame.radial_distance_m[i], si = frame.delta_l_m[i];
@@ -610,8 +620,16 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
       if (!readable(j)) continue;
       const double step = std::abs(frame.radial_distance_m[j] - di);
       const double sj = frame.delta_l_m[j];
-      if (usable(j) && !(step > options.min_jump_sigma * std::sqrt(si * si + sj * sj))) continue;
       if (!usable(a) || !(std::abs(frame.radial_distance_m[a] - di) <= 0.5 * step)) continue;
+      if (usable(j)) {
+        const double sa = frame.delta_l_m[a];
+        const double bend =
+            std::abs(frame.radial_distance_m[j] - 2.0 * di + frame.radial_distance_m[a]);
+        if (!(step > options.min_jump_sigma * std::sqrt(si * si + sj * sj)) ||
+            !(bend > options.min_jump_sigma * std::sqrt(sj * sj + 4.0 * si * si + sa * sa))) {
+          continue;
+        }
+      }
       if (own_share(i, a, j) < 0.5) term = std::max(term, step);
     }
     return term;

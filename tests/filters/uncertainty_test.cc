@@ -201,6 +201,50 @@ TEST(Uncertainty, UnmixingChargesAPixelMostlyOnTheOtherSideTheWholeStep) {
   EXPECT_NEAR(ComputeUncertainty(col, UnmixOnly())[2], std::sqrt(0.0001 + step * step), 1e-5);
 }
 
+TEST(Uncertainty, UnmixingChargesAShareThatIsHalfWithinItsNoise) {
+  // 52 % of the pixel on the object: its centre may lie on either side when the share is 1/2
+  // within its noise. To first order t's σ is sqrt(var_i + t² var_a + (1 - t)² var_j) /
+  // |z_a - z_j|, each phasor's variance (amplitude x ΔL x 4π f / c)². With ΔL 3 cm on the near
+  // side, σ_t = 0.019 and 0.52 - 3 σ_t = 0.46: charged; with 1 cm, σ_t = 0.0063 and 0.50: not.
+  const double k = 4.0 * kPi * 20e6 / kSpeedOfLightMPerS;
+  const Mix half = MixedPixel(0.52, 1.0, 1000.0, 4.0, 40.0);
+  for (const float near_sigma : {0.03f, 0.01f}) {
+    MetricFrame m = EdgeRow(half);
+    for (const int i : {0, 1, 2}) m.delta_l_m[i] = near_sigma;
+    const auto var = [&](int q) {
+      const double s = m.amplitude[q] * m.delta_l_m[q] * k;
+      return s * s;
+    };
+    const std::complex<double> za = std::polar(1000.0, k * 1.0), zj = std::polar(40.0, k * 4.0);
+    const double sigma_t =
+        std::sqrt(var(2) + 0.52 * 0.52 * var(1) + 0.48 * 0.48 * var(3)) / std::abs(za - zj);
+    const bool charged = 0.52 - 3.0 * sigma_t < 0.5;
+    ASSERT_EQ(charged, near_sigma > 0.02f) << sigma_t;  // the two cases straddle the decision
+    const double step = 4.0 - half.distance_m;
+    EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2],
+                charged ? std::sqrt(near_sigma * near_sigma + step * step) : near_sigma, 1e-5)
+        << near_sigma;
+  }
+}
+
+TEST(Uncertainty, UnmixingLeavesASlopeAlone) {
+  // One surface sloping away, read with noise: 1.00, 1.027, 1.10 m at equal amplitude, σ 1 cm.
+  // The middle pixel's 7.3 cm step to the right passes the edge test (3 sqrt 2 σ = 4.2 cm) and
+  // it reads within half of it of its left neighbour, but the step continues the line through
+  // the two (d_j - 2 d_i + d_a = 4.6 cm, within 3 sqrt(1 + 4 + 1) σ = 7.3 cm): no edge. Its
+  // phasor lies between its neighbours' (share 0.73, σ 0.13), which alone would charge it.
+  MetricFrame m = Row({1.0f, 1.027f, 1.1f}, 0.01f);
+  m.info.modulation_frequency_hz = 20e6;
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[i], 0.01, 1e-7) << i;
+  // Where the step leaves that line (2.0 m instead of 1.10), it is an edge, and the share of the
+  // pixel's area on its own side, 1 (its phasor is its left neighbour's), is no charge either;
+  // at 1.5 m with the pixel's amplitude halved (share about 0.5), it is charged.
+  m.radial_distance_m[2] = 2.0f;
+  EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[1], 0.01, 1e-7);
+  m = EdgeRow(MixedPixel(0.5, 1.0, 1000.0, 4.0, 40.0));
+  EXPECT_GT(ComputeUncertainty(m, UnmixOnly())[2], 2.0);
+}
+
 TEST(Uncertainty, UnmixingTakesADimRejectedOtherSide) {
   // The wall is so dim that its pixels read noise (here 3.5 and 0.4 m, ΔL 1 m) and the accuracy
   // filter rejected them; their phasors are still small, and the pixel's share is about its
