@@ -617,17 +617,18 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
   const auto metric = [&](std::size_t k, const std::string& key) {
     return r.metrics[methods[k].name + "." + key];
   };
-  // The unmixed row's largest RMSE within L of a scene and of a held-out variant.
-  const auto worst_of = [&](const std::vector<std::string>& names) {
+  // A method's largest RMSE within L over scenes or held-out variants (those with kept pixels
+  // within L; "none" if no such one).
+  const auto worst_of = [&](std::size_t k, const std::vector<std::string>& names) {
     std::pair<double, std::string> worst{kNaN, "none"};
     for (const std::string& name : names) {
-      const double v = r.metrics[name + "." + methods[18].name + ".rmse_kept_within_l"];
+      const double v = r.metrics[name + "." + methods[k].name + ".rmse_kept_within_l"];
       if (std::isfinite(v) && (std::isnan(worst.first) || v > worst.first)) worst = {v, name};
     }
     return worst;
   };
-  const auto worst_unmixed = worst_of(scenes);
-  const auto worst_unmixed_held_out = worst_of(held_out_scenes);
+  const auto worst_unmixed = worst_of(18, scenes);
+  const auto worst_unmixed_held_out = worst_of(18, held_out_scenes);
   std::ostringstream text;
   text << "Every built-in scene (" << scenes.size()
        << "), each method in its own closed loop (controller, simulated SR-2, pipeline) with the "
@@ -660,8 +661,9 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << ", beyond " << Mm(metric(5, "rmse_kept_within_l"))
        << " (target 50 mm). Surfaces beyond L kept and right: paper "
        << Pct(metric(0, "beyond_right")) << ", two frequencies " << Pct(metric(5, "beyond_right"))
-       << " (the noise at its exposures lets " << Pct(metric(5, "beyond_possible"))
-       << " be right: the expected share within 5 cm from the simulator's σ, were none rejected),"
+       << " (the noise at its exposures lets at most " << Pct(metric(5, "beyond_possible"))
+       << " be right: the expected share within 5 cm from the simulator's σ, were none rejected "
+          "and every one unwrapped right),"
           " the neighbours' prediction with edge pixels unmixed (below) "
        << Pct(metric(18, "beyond_right"))
        << "; of the pixels beyond L that a method keeps, right: paper "
@@ -742,10 +744,11 @@ ExperimentResult Beyond(const ExperimentOptions& o) {
        << ". With edge pixels unmixed as well (uncertainty.unmix_edges: an edge pixel's phasor "
           "solved as a mix of its own side's neighbour and the neighbour across the step, which "
           "may be a dim one the filters rejected; unless the share of its area on its own side "
-          "exceeds one half by 3 σ of that share's noise, its centre may lie across the step, "
-          "although it reads its own side, and it is charged the whole step; a step that "
+          "is at least one half plus 3 σ of that share's noise, its centre may lie across the "
+          "step, although it reads its own side, and it is charged the whole step; a step that "
           "continues the line through the pixel and its own side's neighbour is a slope, not an "
-          "edge), the row with kept pixels combined scores F1 "
+          "edge; phasors too close to tell a pixel wholly on its own side from one half on each "
+          "decide nothing), the row with kept pixels combined scores F1 "
        << F(metric(18, "f1"), 3) << ", RMSE of kept pixels within L "
        << Mm(metric(18, "rmse_kept_within_l")) << " (footprint truth "
        << Mm(metric(18, "footprint_rmse_kept_within_l"))

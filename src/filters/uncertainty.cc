@@ -591,6 +591,11 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     const double noise2 = var(i) + var(a) + var(j);
     const double m2 = options.min_jump_sigma * options.min_jump_sigma;
     if (!std::isfinite(n2) || !(n2 > m2 * noise2)) return kNaN;
+    // Nor where the phasors lie too close to tell a pixel wholly on its own side (t = 1, σ_t² =
+    // (var_i + var_a) / n2) from one half on each side (t = 1/2) at min_jump_sigma σ_t each way:
+    // 1 - 1/2 must exceed 2 m σ_t, or a pixel beside a small step would be charged it by its
+    // noise alone.
+    if (!(n2 > 16.0 * m2 * (var(i) + var(a)))) return kNaN;
     const double t = std::real((zi - zj) * std::conj(across)) / n2;
     const double t_var = (var(i) + t * t * var(a) + (1.0 - t) * (1.0 - t) * var(j)) / n2;
     return t - options.min_jump_sigma * std::sqrt(t_var);

@@ -120,8 +120,8 @@ void VisitOptions(V& v, PipelineOptions& o) {
     v.Field("extrapolate_edges", o.uncertainty.extrapolate_edges,
             "edge term: how far the pixel leaves its own side's line, not a part of the step");
     v.Field("unmix_edges", o.uncertainty.unmix_edges,
-            "an edge pixel not shown (min_jump_sigma) to have most of its area on its own side is "
-            "charged the whole step");
+            "an edge pixel whose phasor, where it can tell, does not show (min_jump_sigma) most "
+            "of its area on its own side is charged the whole step");
     v.Field("unknown_neighbour_flags", FlagMask{o.uncertainty.unknown_neighbour_flags},
             "a pixel next to one with any of these flags is flagged");
     v.Field("judge_combination", o.uncertainty.judge_combination,

@@ -490,7 +490,7 @@ TEST(ExperimentsTest, BeyondMethodsBeatThePaperAndTheVendor) {
   // larger area). Rejecting those lowers the kept pixels' RMSE within L under the central truth.
   // Held out too. (Measured with the full experiment before these predictions were written,
   // 131.6 -> 45.7 mm and held out 184.8 -> 75.6 mm with the share's point estimate, 21.3 and
-  // 23.6 mm with its 3 σ bound: docs/beyond.md, "Mixed pixels unmixed"; asserted here at the
+  // 23.7 mm with its 3 σ bound: docs/beyond.md, "Mixed pixels unmixed"; asserted here at the
   // test's reduced effort.)
   EXPECT_LT(m("predicted_combined_unmixed.rmse_kept_within_l"),
             m("predicted_combined.rmse_kept_within_l"));

@@ -202,15 +202,22 @@ TEST(Uncertainty, UnmixingChargesAPixelMostlyOnTheOtherSideTheWholeStep) {
 }
 
 TEST(Uncertainty, UnmixingChargesAShareThatIsHalfWithinItsNoise) {
-  // 52 % of the pixel on the object: its centre may lie on either side when the share is 1/2
-  // within its noise. To first order t's σ is sqrt(var_i + t² var_a + (1 - t)² var_j) /
-  // |z_a - z_j|, each phasor's variance (amplitude x ΔL x 4π f / c)². With ΔL 3 cm on the near
-  // side, σ_t = 0.019 and 0.52 - 3 σ_t = 0.46: charged; with 1 cm, σ_t = 0.0063 and 0.50: not.
+  // 52 % of the pixel on the object (it reads 1.027 m at amplitude 505): its centre may lie on
+  // either side when the share is 1/2 within its noise. To first order t's σ is sqrt(var_i + t²
+  // var_a + (1 - t)² var_j) / |z_a - z_j| (here 1033), each phasor's variance (amplitude x ΔL x
+  // 4π f / c)². With ΔL 3 cm on the near side, σ_t = 0.0177 and 0.52 - 3 σ_t = 0.467: charged;
+  // with 0.5 cm, σ_t = 0.0030 and 0.511: not; with 3 cm and min_jump_sigma 1, 0.502: not.
   const double k = 4.0 * kPi * 20e6 / kSpeedOfLightMPerS;
   const Mix half = MixedPixel(0.52, 1.0, 1000.0, 4.0, 40.0);
-  for (const float near_sigma : {0.03f, 0.01f}) {
+  struct Case {
+    float near_sigma;
+    double min_jump_sigma;
+    bool charged;
+  };
+  for (const Case& c :
+       {Case{0.03f, 3.0, true}, Case{0.005f, 3.0, false}, Case{0.03f, 1.0, false}}) {
     MetricFrame m = EdgeRow(half);
-    for (const int i : {0, 1, 2}) m.delta_l_m[i] = near_sigma;
+    for (const int i : {0, 1, 2}) m.delta_l_m[i] = c.near_sigma;
     const auto var = [&](int q) {
       const double s = m.amplitude[q] * m.delta_l_m[q] * k;
       return s * s;
@@ -218,12 +225,45 @@ TEST(Uncertainty, UnmixingChargesAShareThatIsHalfWithinItsNoise) {
     const std::complex<double> za = std::polar(1000.0, k * 1.0), zj = std::polar(40.0, k * 4.0);
     const double sigma_t =
         std::sqrt(var(2) + 0.52 * 0.52 * var(1) + 0.48 * 0.48 * var(3)) / std::abs(za - zj);
-    const bool charged = 0.52 - 3.0 * sigma_t < 0.5;
-    ASSERT_EQ(charged, near_sigma > 0.02f) << sigma_t;  // the two cases straddle the decision
+    ASSERT_EQ(0.52 - c.min_jump_sigma * sigma_t < 0.5, c.charged) << sigma_t;
+    UncertaintyOptions o = UnmixOnly();
+    o.min_jump_sigma = c.min_jump_sigma;
     const double step = 4.0 - half.distance_m;
-    EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[2],
-                charged ? std::sqrt(near_sigma * near_sigma + step * step) : near_sigma, 1e-5)
-        << near_sigma;
+    EXPECT_NEAR(ComputeUncertainty(m, o)[2],
+                c.charged ? std::sqrt(c.near_sigma * c.near_sigma + step * step) : c.near_sigma,
+                1e-5)
+        << c.near_sigma << " " << c.min_jump_sigma;
+  }
+}
+
+TEST(Uncertainty, UnmixingLeavesPixelsBesideASmallStepAlone) {
+  // Two bright surfaces s apart (amplitude 1000, σ 1 cm), no mixed pixel: the two beside the step
+  // are each wholly on their own side (t = 1). For a small step the two sides' phasors are too
+  // close for that to show: |z_a - z_j| = 2000 sin(k s / 2) must exceed 4 min_jump_sigma
+  // sqrt(var_i + var_a) (17 cm here), so that a pixel wholly on its own side is shown to lie
+  // there by more than half, with noise; below that the share decides nothing. At 8 cm the
+  // phasors pass the plain separation test (3 sqrt(var_i + var_a + var_j)) and the step leaves
+  // the pixel's own line (8 > 7.3 cm), but t - 3 σ_t would be 0.47 for a pixel at t = 1.
+  for (const float s : {0.07f, 0.08f, 0.085f, 0.1f, 0.15f, 0.25f}) {
+    MetricFrame m = Row({1.0f, 1.0f, 1.0f + s, 1.0f + s}, 0.01f);
+    m.info.modulation_frequency_hz = 20e6;
+    const Image<float> u = ComputeUncertainty(m, UnmixOnly());
+    for (int i = 0; i < 4; ++i) EXPECT_NEAR(u[i], 0.01, 1e-7) << s << " " << i;
+  }
+  // A pixel wholly on its own side whose reading is 1 σ towards a 10 cm step (1.01 m): its share
+  // is 0.90 with σ_t 0.135, so 0.90 - 3 σ_t = 0.495 would charge it, had the phasors (100 apart,
+  // against 4 x 3 x 11.9) been taken to tell.
+  MetricFrame noisy = Row({1.0f, 1.01f, 1.1f, 1.1f}, 0.01f);
+  noisy.info.modulation_frequency_hz = 20e6;
+  const Image<float> u_noisy = ComputeUncertainty(noisy, UnmixOnly());
+  for (int i = 0; i < 4; ++i) EXPECT_NEAR(u_noisy[i], 0.01, 1e-7) << i;
+  // The same beside a neighbour the filters rejected (no bend test for it), 4-8 cm away.
+  for (const float s : {0.04f, 0.06f, 0.08f}) {
+    MetricFrame m = Row({1.0f, 1.0f, 1.0f + s, 1.0f + s}, 0.01f);
+    m.info.modulation_frequency_hz = 20e6;
+    m.flags[2] = m.flags[3] = PixelFlags(Flag::kHighDeltaL);
+    const Image<float> u = ComputeUncertainty(m, UnmixOnly());
+    for (int i = 0; i < 2; ++i) EXPECT_NEAR(u[i], 0.01, 1e-7) << s << " " << i;
   }
 }
 
@@ -236,9 +276,9 @@ TEST(Uncertainty, UnmixingLeavesASlopeAlone) {
   MetricFrame m = Row({1.0f, 1.027f, 1.1f}, 0.01f);
   m.info.modulation_frequency_hz = 20e6;
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[i], 0.01, 1e-7) << i;
-  // Where the step leaves that line (2.0 m instead of 1.10), it is an edge, and the share of the
-  // pixel's area on its own side, 1 (its phasor is its left neighbour's), is no charge either;
-  // at 1.5 m with the pixel's amplitude halved (share about 0.5), it is charged.
+  // Where the step leaves that line (2.0 m instead of 1.10), it is an edge, and the pixel's
+  // share on its own side, 0.974 (σ 0.014), is no charge either; a pixel half on a bright
+  // object and half on a dim wall (it reads 1.029 m at amplitude 484) is charged.
   m.radial_distance_m[2] = 2.0f;
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[1], 0.01, 1e-7);
   m = EdgeRow(MixedPixel(0.5, 1.0, 1000.0, 4.0, 40.0));

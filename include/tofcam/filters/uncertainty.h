@@ -54,17 +54,19 @@ struct UncertaintyOptions {
   /// and of j, least squares in t: t is the share of the pixel's area (footprint) on its own
   /// side. Its reading is its own side's distance (a bright near surface outweighs a dim far
   /// one's larger area), but its centre lies on its own side only when t > 1/2 (a straight
-  /// edge). So unless t exceeds 1/2 by more than min_jump_sigma of its σ (to first order
+  /// edge). So unless t is at least 1/2 + min_jump_sigma σ_t (to first order σ_t =
   /// sqrt(var_i + t² var_a + (1 - t)² var_j) / |z_a - z_j|, each phasor's variance (amplitude x
   /// ΔL x 4π f / c)²), its edge term becomes the whole step. Otherwise the term is as the other
   /// options say. j may be a pixel a filter rejected (noisy, inconsistent), not a clipped or
-  /// invalid one or one of amplitude 0; a usable j must pass the edge test above and its step
-  /// must leave the line through a and the pixel by as much (min_jump_sigma σ of d_j - 2 d + d_a;
-  /// on a slope, or on one surface with a brightness gradient, t ≈ 1/2 means nothing); the two
-  /// sides' phasors must lie more than min_jump_sigma σ of t's noise apart. Needs the frame's
+  /// invalid one or one of amplitude 0. A usable j must pass the edge test above, and its step
+  /// must leave the line through a and the pixel by as much (min_jump_sigma σ of d_j - 2 d + d_a:
+  /// on a slope t ≈ 1/2 means nothing). Nothing is decided where the phasors lie too close:
+  /// within min_jump_sigma sqrt(var_i + var_a + var_j) of each other, or within 4 min_jump_sigma
+  /// sqrt(var_i + var_a), where a pixel wholly on its own side could not be told from one half on
+  /// each (between two surfaces of one brightness, steps under about 17 ΔL). Needs the frame's
   /// amplitude and a finite positive modulation frequency, else nothing is unmixed; pixels whose
   /// own or a's amplitude is not finite and positive are not unmixed. Per-pixel form only.
-  /// Measured: docs/beyond.md ("Mixed pixels unmixed").
+  /// Measured: docs/beyond.md ("Mixed pixels unmixed", "The share's noise, and slopes").
   bool unmix_edges = false;
   /// A pixel with a 4-neighbour carrying any of these flags gets u = +inf (see the file
   /// comment); 0 = none (the default). Measured (`tofcam experiment beyond`, two frequencies):
