@@ -568,10 +568,11 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
   };
   // t for pixel i between a and j (j readable), less min_jump_sigma times its σ: the share of
   // i's area on its own side that the phasors show beyond their noise. NaN where i's or a's
-  // amplitude is not positive and finite or the two sides' phasors lie within min_jump_sigma of
-  // t's noise apart. Each phasor's σ (per component) is its amplitude x its phase σ, ΔL x the
+  // amplitude is not positive and finite or the two sides' phasors lie too close to decide (the
+  // two tests below). Each phasor's σ (per component) is its amplitude x its phase σ, ΔL x the
   // wavenumber; after the frame pair ΔL is the two frames' combined σ while the phasor is the
-  // current frame's, so both tests are up to sqrt 2 lenient there. To first order t's variance
+  // current frame's, so the two tests and the margin are up to sqrt 2 lenient there. To first
+  // order t's variance
   // is (var_i + t² var_a + (1 - t)² var_j) / |z_a - z_j|²: each phasor's noise projected on the
   // line between the two sides.
   const auto own_share = [&](std::size_t i, std::size_t a, std::size_t j) {
@@ -591,8 +592,8 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
     const double noise2 = var(i) + var(a) + var(j);
     const double m2 = options.min_jump_sigma * options.min_jump_sigma;
     if (!std::isfinite(n2) || !(n2 > m2 * noise2)) return kNaN;
-    // Nor where the phasors lie too close to tell a pixel wholly on its own side (t = 1, σ_t² =
-    // (var_i + var_a) / n2) from one half on each side (t = 1/2) at min_jump_sigma σ_t each way:
+    // Nor where the phasors lie too close for a pixel wholly on its own side (t = 1, σ_t² =
+    // (var_i + var_a) / n2) to clear the margin when its t̂ falls min_jump_sigma σ_t short:
     // 1 - 1/2 must exceed 2 m σ_t, or a pixel beside a small step would be charged it by its
     // noise alone.
     if (!(n2 > 16.0 * m2 * (var(i) + var(a)))) return kNaN;

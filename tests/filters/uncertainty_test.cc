@@ -251,8 +251,8 @@ TEST(Uncertainty, UnmixingLeavesPixelsBesideASmallStepAlone) {
     for (int i = 0; i < 4; ++i) EXPECT_NEAR(u[i], 0.01, 1e-7) << s << " " << i;
   }
   // A pixel wholly on its own side whose reading is 1 σ towards a 10 cm step (1.01 m): its share
-  // is 0.90 with σ_t 0.135, so 0.90 - 3 σ_t = 0.495 would charge it, had the phasors (100 apart,
-  // against 4 x 3 x 11.9) been taken to tell.
+  // is 0.90 with σ_t 0.135, so 0.90 - 3 σ_t = 0.495 would charge it, had the phasors (84 apart,
+  // against 4 x 3 x 11.9 = 142) been taken to tell.
   MetricFrame noisy = Row({1.0f, 1.01f, 1.1f, 1.1f}, 0.01f);
   noisy.info.modulation_frequency_hz = 20e6;
   const Image<float> u_noisy = ComputeUncertainty(noisy, UnmixOnly());
@@ -268,17 +268,19 @@ TEST(Uncertainty, UnmixingLeavesPixelsBesideASmallStepAlone) {
 }
 
 TEST(Uncertainty, UnmixingLeavesASlopeAlone) {
-  // One surface sloping away, read with noise: 1.00, 1.027, 1.10 m at equal amplitude, σ 1 cm.
-  // The middle pixel's 7.3 cm step to the right passes the edge test (3 sqrt 2 σ = 4.2 cm) and
-  // it reads within half of it of its left neighbour, but the step continues the line through
-  // the two (d_j - 2 d_i + d_a = 4.6 cm, within 3 sqrt(1 + 4 + 1) σ = 7.3 cm): no edge. Its
-  // phasor lies between its neighbours' (share 0.73, σ 0.13), which alone would charge it.
-  MetricFrame m = Row({1.0f, 1.027f, 1.1f}, 0.01f);
+  // One surface sloping away, read with noise: 1.00, 1.055, 1.18 m at equal amplitude, σ 1 cm.
+  // The middle pixel's 12.5 cm step to the right passes the edge test (3 sqrt 2 σ = 4.2 cm), it
+  // reads within half of it of its left neighbour, and the two sides' phasors are far enough
+  // apart to decide (151 against 4 x 3 x 11.9 = 142), but the step continues the line through
+  // the two (d_j - 2 d_i + d_a = 7.0 cm, within 3 sqrt(1 + 4 + 1) σ = 7.3 cm): no edge. Its
+  // phasor lies between its neighbours' (share 0.69, σ 0.070: 0.69 - 3σ = 0.485), which alone
+  // would charge it.
+  MetricFrame m = Row({1.0f, 1.055f, 1.18f}, 0.01f);
   m.info.modulation_frequency_hz = 20e6;
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[i], 0.01, 1e-7) << i;
-  // Where the step leaves that line (2.0 m instead of 1.10), it is an edge, and the pixel's
-  // share on its own side, 0.974 (σ 0.014), is no charge either; a pixel half on a bright
-  // object and half on a dim wall (it reads 1.029 m at amplitude 484) is charged.
+  // Where the step leaves that line (2.0 m instead of 1.18), it is an edge, and the pixel's
+  // share on its own side is no charge either; a pixel half on a bright object and half on a
+  // dim wall (it reads 1.029 m at amplitude 484) is charged.
   m.radial_distance_m[2] = 2.0f;
   EXPECT_NEAR(ComputeUncertainty(m, UnmixOnly())[1], 0.01, 1e-7);
   m = EdgeRow(MixedPixel(0.5, 1.0, 1000.0, 4.0, 40.0));

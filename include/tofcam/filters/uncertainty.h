@@ -62,10 +62,11 @@ struct UncertaintyOptions {
   /// must leave the line through a and the pixel by as much (min_jump_sigma σ of d_j - 2 d + d_a:
   /// on a slope t ≈ 1/2 means nothing). Nothing is decided where the phasors lie too close:
   /// within min_jump_sigma sqrt(var_i + var_a + var_j) of each other, or within 4 min_jump_sigma
-  /// sqrt(var_i + var_a), where a pixel wholly on its own side could not be told from one half on
-  /// each (between two surfaces of one brightness, steps under about 17 ΔL). Needs the frame's
-  /// amplitude and a finite positive modulation frequency, else nothing is unmixed; pixels whose
-  /// own or a's amplitude is not finite and positive are not unmixed. Per-pixel form only.
+  /// sqrt(var_i + var_a), where a pixel wholly on its own side would be charged by its noise
+  /// (between two surfaces of one brightness, steps under 4 sqrt 2 min_jump_sigma ΔL, 17 ΔL at
+  /// 3, for small ΔL, and as far from a multiple of L). Needs the frame's amplitude and a finite
+  /// positive modulation frequency, else nothing is unmixed; pixels whose own or a's amplitude
+  /// is not finite and positive are not unmixed. Per-pixel form only.
   /// Measured: docs/beyond.md ("Mixed pixels unmixed", "The share's noise, and slopes").
   bool unmix_edges = false;
   /// A pixel with a 4-neighbour carrying any of these flags gets u = +inf (see the file
