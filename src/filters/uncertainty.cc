@@ -572,9 +572,8 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
   // two tests below). Each phasor's σ (per component) is its amplitude x its phase σ, ΔL x the
   // wavenumber; after the frame pair ΔL is the two frames' combined σ while the phasor is the
   // current frame's, so the two tests and the margin are up to sqrt 2 lenient there. To first
-  // order t's variance
-  // is (var_i + t² var_a + (1 - t)² var_j) / |z_a - z_j|²: each phasor's noise projected on the
-  // line between the two sides.
+  // order t's variance is (var_i + t² var_a + (1 - t)² var_j) / |z_a - z_j|²: each phasor's
+  // noise projected on the line between the two sides.
   const auto own_share = [&](std::size_t i, std::size_t a, std::size_t j) {
     constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
     for (const std::size_t q : {i, a}) {
@@ -589,16 +588,16 @@ Image<float> ComputeUncertainty(const MetricFrame& frame, const UncertaintyOptio
           static_cast<double>(frame.amplitude[q]) * frame.delta_l_m[q] * wavenumber;
       return sigma * sigma;
     };
-    const double noise2 = var(i) + var(a) + var(j);
+    const double var_i = var(i), var_a = var(a), var_j = var(j);
     const double m2 = options.min_jump_sigma * options.min_jump_sigma;
-    if (!std::isfinite(n2) || !(n2 > m2 * noise2)) return kNaN;
+    if (!std::isfinite(n2) || !(n2 > m2 * (var_i + var_a + var_j))) return kNaN;
     // Nor where the phasors lie too close for a pixel wholly on its own side (t = 1, σ_t² =
     // (var_i + var_a) / n2) to clear the margin when its t̂ falls min_jump_sigma σ_t short:
     // 1 - 1/2 must exceed 2 m σ_t, or a pixel beside a small step would be charged it by its
     // noise alone.
-    if (!(n2 > 16.0 * m2 * (var(i) + var(a)))) return kNaN;
+    if (!(n2 > 16.0 * m2 * (var_i + var_a))) return kNaN;
     const double t = std::real((zi - zj) * std::conj(across)) / n2;
-    const double t_var = (var(i) + t * t * var(a) + (1.0 - t) * (1.0 - t) * var(j)) / n2;
+    const double t_var = (var_i + t * t * var_a + (1.0 - t) * (1.0 - t) * var_j) / n2;
     return t - options.min_jump_sigma * std::sqrt(t_var);
   };
   // The unmixing's edge term of usable pixel i at (r, c): the largest step to a readable
