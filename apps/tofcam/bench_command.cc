@@ -136,31 +136,52 @@ Input MakeInput(int width, int height, int frames, double delta_l_scale,
   return in;
 }
 
-// The memcpy floor's source and destination: page-aligned, touched once, reused. The alignment
-// is fixed so the floor does not depend on where the allocator happens to place two large blocks
-// (with the CLI's allocator policy, main.cc, they come from the heap; by default from fresh
-// mappings). Destination minus source is a multiple of 4096 then; glibc's memcpy copied such
-// buffers as fast as ones 64 or 2112 bytes apart on the Zen 5 of docs/benchmarks.md (60 KB to
-// 13 MB, five alternated rounds).
+// The memcpy floor's sources and destination: page-aligned, touched once, reused. There is one
+// source per frame the stage rows cycle through (`sources`, at most 256 MiB of them), and the
+// floor copies source r mod sources on repetition r: the stage reads a different frame's inputs
+// each call, so the floor reads as many distinct bytes. With a single source the floor stayed in a
+// 32 MiB L3 at 1 MP while the stage's four frames (36 MB) did not (docs/benchmarks.md, fourteenth
+// and fifteenth sessions); the destination is reused, as every stage row reuses its output. The
+// alignment is fixed so the floor does not depend on where the allocator happens to place large
+// blocks (with the CLI's allocator policy, main.cc, they come from the heap; by default from
+// fresh mappings). Destination minus source is a multiple of 4096 then; glibc's memcpy copied
+// such buffers as fast as ones 64 or 2112 bytes apart on the Zen 5 of docs/benchmarks.md (60 KB
+// to 13 MB, five alternated rounds).
 class CopyBuffers {
  public:
-  void Ensure(std::size_t bytes) {
-    bytes = std::max<std::size_t>(bytes, 1);  // never null pointers, even for an empty copy
-    if (bytes <= size_) return;
+  void Ensure(std::size_t bytes, std::size_t sources) {
     constexpr std::size_t kPage = 4096;
-    const std::size_t rounded = (bytes + kPage - 1) / kPage * kPage;
+    // Never null pointers, even for an empty copy; never smaller than before.
+    const std::size_t rounded =
+        (std::max({bytes, size_, std::size_t{1}}) + kPage - 1) / kPage * kPage;
+    // Sources past 256 MiB in all change nothing (no cache holds them) but the memory taken:
+    // with --frames 1000 at 1 MP the floor would otherwise allocate tens of GB.
+    constexpr std::size_t kMaxSourceBytes = std::size_t{256} << 20;
+    sources = std::min(std::max({sources, src_.size(), std::size_t{1}}),
+                       std::max<std::size_t>(1, kMaxSourceBytes / rounded));
+    if (rounded == size_ && sources == src_.size()) return;
     size_ = 0;
-    src_.reset(static_cast<char*>(std::aligned_alloc(kPage, rounded)));
-    dst_.reset(static_cast<char*>(std::aligned_alloc(kPage, rounded)));
-    if (!src_ || !dst_) {
-      throw Error(ErrorCode::kUnsupported, "bench: cannot allocate " + std::to_string(2 * rounded) +
-                                               " bytes for the memcpy floor");
+    src_.clear();
+    dst_.reset();
+    auto allocate = [&] {
+      Buffer b(static_cast<char*>(std::aligned_alloc(kPage, rounded)));
+      if (!b) {
+        throw Error(ErrorCode::kUnsupported, "bench: cannot allocate " +
+                                                 std::to_string((sources + 1) * rounded) +
+                                                 " bytes for the memcpy floor");
+      }
+      return b;
+    };
+    for (std::size_t k = 0; k < sources; ++k) {
+      src_.push_back(allocate());
+      std::memset(src_.back().get(), 1, rounded);  // touched now: no page faults in the floor
     }
-    std::memset(src_.get(), 1, rounded);  // touched now: no page faults in the floor
+    dst_ = allocate();
     std::memset(dst_.get(), 0, rounded);
     size_ = rounded;
   }
-  [[nodiscard]] char* src() const { return src_.get(); }
+  /// Source r mod the number of sources.
+  [[nodiscard]] const char* src(std::size_t r) const { return src_[r % src_.size()].get(); }
   [[nodiscard]] char* dst() const { return dst_.get(); }
   [[nodiscard]] std::size_t size() const { return size_; }
 
@@ -168,7 +189,9 @@ class CopyBuffers {
   struct Free {
     void operator()(char* p) const { std::free(p); }
   };
-  std::unique_ptr<char, Free> src_, dst_;
+  using Buffer = std::unique_ptr<char, Free>;
+  std::vector<Buffer> src_;
+  Buffer dst_;
   std::size_t size_ = 0;
 };
 
@@ -273,7 +296,7 @@ void InitWorkspace(Workspace& ws, const Input& in, std::size_t max_copy_bytes) {
   ws.pipeline_default.emplace(po, in.info);
   po.filters = AllFilters();
   ws.pipeline_all_filters.emplace(po, in.info);
-  ws.copy.Ensure(max_copy_bytes);
+  ws.copy.Ensure(max_copy_bytes, ws.ready.size());
 }
 
 // One stage: `run(ws, i)` processes frame i (mod the frame count) of the workspace.
@@ -598,6 +621,8 @@ struct Row {
   double bytes_per_pixel = 0;
   double memcpy_ns = 0;
   std::string note;
+  double memcpy_hot_ns = 0;  // the floor with one source copied again and again (kept in cache)
+  double ratio_hot = 0;      // median over the batches of stage / that floor
   // Spread over the batches: ns per frame (min, max) and, with a floor, the stage / memcpy ratio
   // of each pair of back-to-back batches (median, min, max).
   double ns_min = 0, ns_max = 0;
@@ -609,6 +634,7 @@ struct Row {
 // kPairs pairs, with the minimum and maximum as the spread.
 struct Paired {
   double stage_ns = 0, stage_min = 0, stage_max = 0, floor_ns = 0;
+  double hot_floor_ns = 0, hot_ratio = 0;  // against one source copied again and again
   double ratio = 0, ratio_min = 0, ratio_max = 0;
 };
 constexpr int kPairs = 7;
@@ -635,24 +661,36 @@ double Median(std::vector<double> v) {
 Paired TimeAgainstFloor(std::vector<Workspace>& ws, int threads,
                         const std::function<void(Workspace&, std::size_t)>& fn,
                         std::size_t floor_bytes, double min_time_s) {
-  const std::function<void(Workspace&, std::size_t)> copy = [](Workspace& w, std::size_t) {
-    std::memcpy(w.copy.dst(), w.copy.src(), w.copy_bytes);
+  // The floor copies the source of the frame the stage would take (r mod the frame count); the
+  // hot floor copies one source again and again, as the floor did before the fifteenth session.
+  const std::function<void(Workspace&, std::size_t)> copy = [](Workspace& w, std::size_t r) {
+    std::memcpy(w.copy.dst(), w.copy.src(r), w.copy_bytes);
+    Sink(w, w.copy.dst());
+  };
+  const std::function<void(Workspace&, std::size_t)> hot_copy = [](Workspace& w, std::size_t) {
+    std::memcpy(w.copy.dst(), w.copy.src(0), w.copy_bytes);
     Sink(w, w.copy.dst());
   };
   for (auto& w : ws) w.copy_bytes = floor_bytes;
   const std::size_t reps = CalibrateReps(ws, threads, fn, min_time_s);
   const std::size_t floor_reps = CalibrateReps(ws, threads, copy, min_time_s);
-  std::vector<double> stage, floor, ratio;
+  auto per_call = [threads](double ns, std::size_t n) {
+    return ns / static_cast<double>(n * static_cast<std::size_t>(threads));
+  };
+  std::vector<double> stage, floor, hot, ratio, hot_ratio;
   for (int b = 0; b < kPairs; ++b) {
-    const double ts = RunBatch(ws, threads, fn, reps) /
-                      static_cast<double>(reps * static_cast<std::size_t>(threads));
-    const double tf = RunBatch(ws, threads, copy, floor_reps) /
-                      static_cast<double>(floor_reps * static_cast<std::size_t>(threads));
+    const double ts = per_call(RunBatch(ws, threads, fn, reps), reps);
+    const double tf = per_call(RunBatch(ws, threads, copy, floor_reps), floor_reps);
+    const double th = per_call(RunBatch(ws, threads, hot_copy, floor_reps), floor_reps);
     stage.push_back(ts);
     floor.push_back(tf);
+    hot.push_back(th);
     ratio.push_back(ts / tf);
+    hot_ratio.push_back(ts / th);
   }
   Paired p;
+  p.hot_floor_ns = Median(hot);
+  p.hot_ratio = Median(hot_ratio);
   p.stage_ns = Median(stage);
   p.stage_min = *std::min_element(stage.begin(), stage.end());
   p.stage_max = *std::max_element(stage.begin(), stage.end());
@@ -668,7 +706,7 @@ double MemcpyNs(std::vector<Workspace>& ws, int threads, std::size_t bytes, doub
   return TimePerCall(
       ws, threads,
       [](Workspace& w, std::size_t) {
-        std::memcpy(w.copy.dst(), w.copy.src(), w.copy_bytes);
+        std::memcpy(w.copy.dst(), w.copy.src(0), w.copy_bytes);
         Sink(w, w.copy.dst());
       },
       min_time_s);
@@ -938,12 +976,16 @@ void RunBench(const BenchOptions& o) {
   report["compiler"] = __VERSION__;
   report["frames"] = o.frames;
   report["min_time_s"] = o.min_time_s;
+  report["floor"] =
+      "memcpy of the stage's minimal traffic (read + write), from one source per simulated frame "
+      "in turn (memcpy_us, ratio_to_memcpy) and from one source again and again (memcpy_hot_us, "
+      "ratio_to_hot_memcpy)";
 
   // Memory bandwidth: a 256 MiB memcpy (read + write counted).
   if (!o.peers_only && !stages_only) {
     constexpr std::size_t kBytes = std::size_t{256} << 20;
     std::vector<Workspace> ws(2);
-    for (auto& w : ws) w.copy.Ensure(kBytes);
+    for (auto& w : ws) w.copy.Ensure(kBytes, 1);
     for (int t : thread_counts) {
       const double ns = MemcpyNs(ws, t, kBytes, std::max(o.min_time_s, 0.5));
       report["memory_bandwidth_gb_s"][std::to_string(t) + "_threads"] = 2.0 * kBytes / ns * t;
@@ -987,12 +1029,14 @@ void RunBench(const BenchOptions& o) {
         // A memcpy of N bytes reads N and writes N: N = traffic / 2 gives the same traffic.
         const auto bytes =
             static_cast<std::size_t>(r.bytes_per_pixel / 2 * static_cast<double>(in.pixels()));
-        for (Workspace& w : ws) w.copy.Ensure(bytes);
+        for (Workspace& w : ws) w.copy.Ensure(bytes, w.ready.size());
         const Paired p = TimeAgainstFloor(ws, t, s.run, bytes, o.min_time_s);
         r.ns_per_frame = p.stage_ns / s.frames_per_call;
         r.ns_min = p.stage_min / s.frames_per_call;
         r.ns_max = p.stage_max / s.frames_per_call;
         r.memcpy_ns = p.floor_ns;
+        r.memcpy_hot_ns = p.hot_floor_ns;
+        r.ratio_hot = p.hot_ratio / s.frames_per_call;
         // Per input frame on both sides: a call of a multi-frame stage moves frames_per_call
         // frames' traffic.
         r.ratio = p.ratio / s.frames_per_call;
@@ -1088,6 +1132,8 @@ void RunBench(const BenchOptions& o) {
         j["ratio_to_memcpy"] = r.ratio;  // median of the paired batches
         j["ratio_min"] = r.ratio_min;
         j["ratio_max"] = r.ratio_max;
+        j["memcpy_hot_us"] = r.memcpy_hot_ns * 1e-3;
+        j["ratio_to_hot_memcpy"] = r.ratio_hot;
       }
       if (!r.note.empty()) j["note"] = r.note;
       jr.push_back(j);
@@ -1116,15 +1162,16 @@ void RunBench(const BenchOptions& o) {
   for (const Row& r : rows) {
     if (r.resolution != last) {
       last = r.resolution;
-      std::printf("\n== %s (%lld px)\n%-40s %3s %11s %8s %10s %11s %7s %13s\n",
+      std::printf("\n== %s (%lld px)\n%-40s %3s %11s %8s %10s %11s %7s %13s %10s\n",
                   r.resolution.c_str(), static_cast<long long>(r.pixels), "stage", "thr",
-                  "us/frame", "ns/px", "frames/s", "memcpy us", "ratio", "ratio min-max");
+                  "us/frame", "ns/px", "frames/s", "memcpy us", "ratio", "ratio min-max",
+                  "hot ratio");
     }
     std::printf("%-40s %3d %11.1f %8.2f %10.0f", r.stage.c_str(), r.threads, r.ns_per_frame * 1e-3,
                 r.ns_per_frame / static_cast<double>(r.pixels), 1e9 / r.ns_per_frame);
     if (r.bytes_per_pixel > 0) {
-      std::printf(" %11.1f %7.2f %6.2f-%-6.2f\n", r.memcpy_ns * 1e-3, r.ratio, r.ratio_min,
-                  r.ratio_max);
+      std::printf(" %11.1f %7.2f %6.2f-%-6.2f %10.2f\n", r.memcpy_ns * 1e-3, r.ratio, r.ratio_min,
+                  r.ratio_max, r.ratio_hot);
     } else {
       std::printf(" %11s %7s\n", "-", "-");
     }
@@ -1132,8 +1179,10 @@ void RunBench(const BenchOptions& o) {
   std::printf(
       "\n2-thread rows: two frames processed concurrently (no stage has a threaded path);\n"
       "time is wall time per frame. memcpy: a copy with the stage's minimal memory "
-      "traffic;\nratio: median over %d pairs of back-to-back batches (stage, memcpy) of "
-      "stage / memcpy.\n",
+      "traffic,\nfrom one source per simulated frame in turn (as the stage reads a new frame "
+      "each call);\nratio: median over %d rounds of back-to-back batches (stage, memcpy, hot "
+      "memcpy) of\nstage / memcpy; hot ratio: the same against one source copied again and "
+      "again (kept in cache).\n",
       kPairs);
   if (!sim_rows.empty()) {
     std::printf(

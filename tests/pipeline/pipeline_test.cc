@@ -1202,6 +1202,11 @@ TEST_F(RunCommandTest, BenchRunsOnlyTheStagesAndSizesAskedFor) {
   EXPECT_EQ(out.find("640x480"), std::string::npos) << out;
   EXPECT_EQ(out.find("memory_bandwidth"), std::string::npos) << out;
   EXPECT_NE(out.find("\"simulator\": []"), std::string::npos) << out;
+  // Both floors: the one cycling a source per frame (the ratio's) and the hot one.
+  for (const char* key :
+       {"\"memcpy_us\"", "\"ratio_to_memcpy\"", "\"memcpy_hot_us\"", "\"ratio_to_hot_memcpy\""}) {
+    EXPECT_NE(out.find(key), std::string::npos) << key << " missing: " << out;
+  }
   const int invalid = ExitStatus(ErrorCode::kInvalidArgument);
   EXPECT_EQ(Run("bench --stage nosuchstage"), invalid);
   EXPECT_NE(Stderr().find("'nosuchstage' matches no stage"), std::string::npos) << Stderr();
