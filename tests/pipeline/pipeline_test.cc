@@ -1186,7 +1186,7 @@ TEST_F(RunCommandTest, ADamagedRecordingIsOneLineOfError) {
 // is not one of the three is refused before any work.
 TEST_F(RunCommandTest, BenchRunsOnlyTheStagesAndSizesAskedFor) {
   std::string out;
-  ASSERT_EQ(Run("bench --stage \"FALSE Colour\" --size 160x124 --threads 1 --frames 1 "
+  ASSERT_EQ(Run("bench --stage \"FALSE Colour\" --size 160x124 --threads 1 --frames 2 "
                 "--min-time-s 0.01 --json",
                 &out),
             0)
@@ -1202,11 +1202,16 @@ TEST_F(RunCommandTest, BenchRunsOnlyTheStagesAndSizesAskedFor) {
   EXPECT_EQ(out.find("640x480"), std::string::npos) << out;
   EXPECT_EQ(out.find("memory_bandwidth"), std::string::npos) << out;
   EXPECT_NE(out.find("\"simulator\": []"), std::string::npos) << out;
-  // Both floors: the one cycling a source per frame (the ratio's) and the hot one.
-  for (const char* key :
-       {"\"memcpy_us\"", "\"ratio_to_memcpy\"", "\"memcpy_hot_us\"", "\"ratio_to_hot_memcpy\""}) {
-    EXPECT_NE(out.find(key), std::string::npos) << key << " missing: " << out;
+  // Both floors, timed: false colour states its footprint (the frame's distance and flags, its
+  // image), so over two frames its floor cycles two sources (FloorSources: 2 x 6 + 3 = 15 B/px,
+  // 3 halves of 4.5 = 13.5 fit, 4 do not); the hot floor copies one.
+  const nlohmann::json row = nlohmann::json::parse(out).at("stages").at(0);
+  for (const char* key : {"memcpy_us", "ratio_to_memcpy", "memcpy_hot_us", "ratio_to_hot_memcpy"}) {
+    ASSERT_TRUE(row.contains(key)) << key << " missing: " << out;
+    EXPECT_GT(row.at(key).get<double>(), 0.0) << key << ": " << out;
   }
+  EXPECT_EQ(row.at("memcpy_sources").get<int>(), 2) << out;
+  EXPECT_DOUBLE_EQ(row.at("footprint_bytes_per_pixel").get<double>(), 15.0) << out;
   const int invalid = ExitStatus(ErrorCode::kInvalidArgument);
   EXPECT_EQ(Run("bench --stage nosuchstage"), invalid);
   EXPECT_NE(Stderr().find("'nosuchstage' matches no stage"), std::string::npos) << Stderr();
