@@ -65,7 +65,7 @@ struct BenchOptions {
   bool json_output = false;
   int frames = 8;                // simulated frames per resolution, cycled through by every stage
   int threads = 0;               // 0 = both 1 and 2
-  double min_time_s = 0.25;      // per figure (5 batches)
+  double min_time_s = 0.25;      // per figure (7 rounds of a stage batch and its floors)
   std::string export_peers_dir;  // write clouds + tofcam filter results for bench/peers
   bool skip_simulator = false;
   bool skip_recording = false;
@@ -138,56 +138,6 @@ Input MakeInput(int width, int height, int frames, double delta_l_scale,
   }
   return in;
 }
-
-// The memcpy floor's sources and destination: page-aligned, touched once, reused. The floor of a
-// row copies source r mod the source count on repetition r (FloorSources, bench_floor.h, says how
-// many) into one destination, as the row reuses its output. The alignment is fixed so the floor
-// does not depend on where the allocator happens to place large blocks (with the CLI's
-// allocator policy, main.cc, they come from the heap; by default from fresh mappings).
-// Destination minus source is a multiple of 4096 then; glibc's memcpy copied such buffers as fast
-// as ones 64 or 2112 bytes apart on the Zen 5 of docs/benchmarks.md (60 KB to 13 MB, five
-// alternated rounds).
-class CopyBuffers {
- public:
-  /// `sources` sources of `bytes` each, one after the other in one block, and a destination of
-  /// `bytes`. Sources past 256 MiB in all are dropped: no cache holds them, and at 1 MP with many
-  /// frames they would take gigabytes. Allocates (and touches) only when a block must grow.
-  void Ensure(std::size_t bytes, std::size_t sources) {
-    constexpr std::size_t kPage = 4096;
-    constexpr std::size_t kMaxSourceBytes = std::size_t{256} << 20;
-    const std::size_t slot = (std::max<std::size_t>(bytes, 1) + kPage - 1) / kPage * kPage;
-    const std::size_t count =
-        std::clamp<std::size_t>(sources, 1, std::max<std::size_t>(1, kMaxSourceBytes / slot));
-    Grow(src_, src_bytes_, slot * count, 1);
-    Grow(dst_, dst_bytes_, slot, 0);
-    slot_ = slot;
-    count_ = count;
-  }
-  /// Source r mod the source count (Ensure must have been called).
-  [[nodiscard]] const char* src(std::size_t r) const { return src_.get() + (r % count_) * slot_; }
-  [[nodiscard]] char* dst() const { return dst_.get(); }
-  [[nodiscard]] std::size_t sources() const { return count_; }
-
- private:
-  struct Free {
-    void operator()(char* p) const { std::free(p); }
-  };
-  using Buffer = std::unique_ptr<char, Free>;
-  static void Grow(Buffer& b, std::size_t& size, std::size_t need, int fill) {
-    if (need <= size) return;
-    b.reset();
-    size = 0;
-    b.reset(static_cast<char*>(std::aligned_alloc(4096, need)));
-    if (!b) {
-      throw Error(ErrorCode::kUnsupported,
-                  "bench: cannot allocate " + std::to_string(need) + " bytes for the memcpy floor");
-    }
-    std::memset(b.get(), fill, need);  // touched now: no page faults in the floor
-    size = need;
-  }
-  Buffer src_, dst_;
-  std::size_t src_bytes_ = 0, dst_bytes_ = 0, slot_ = 4096, count_ = 1;
-};
 
 // Per-thread state: own copies of the inputs and own output buffers.
 struct Workspace {
@@ -364,23 +314,27 @@ std::vector<Stage> MakeStages() {
       Sink(ws, ws.raised.data());
     };
   };
-  // Footprints of the filter rows: the output flags (2) and the ray table (12, jump edge and
-  // cells) are the same on every call; the frame's channels and flags are the call's frame's.
-  auto filter_footprint = [](double traffic, bool rays) {
+  // Footprints of the filter rows: the output flags (2 B/px) and the ray table (12, jump edge,
+  // cells and the full set) are the same on every call; the channels the row reads are the
+  // frame's. The frame's flags (2) are read only by the neighbourhood filters (as the pixels to
+  // ignore), the full set and the uncertainty; the per-pixel thresholds read channels alone
+  // (their traffic counts 2 B/px of flags in anyway, as it did before the footprints).
+  auto filter_footprint = [](double traffic, bool rays, bool reads_flags) {
     const double fixed = 2.0 + (rays ? 12.0 : 0.0);
-    return Footprint{traffic - fixed, fixed};
+    return Footprint{traffic - fixed - (reads_flags ? 0.0 : 2.0), fixed};
   };
   for (const auto& [label, key] : filters) {
     const double bytes = filter_bytes.at(key);
+    const std::string_view k = key;
+    const bool neighbourhood = k == "flying_pixel" || k == "jump_edge" || k == "weingarten";
     s.push_back({label, bytes, 1, true, filter_row(key),
-                 filter_footprint(
-                     bytes, std::string(key) == "jump_edge" || std::string(key) == "weingarten")});
+                 filter_footprint(bytes, k == "jump_edge" || k == "weingarten", neighbourhood)});
   }
   s.push_back({"filters: paper default set", 4 + 4 + 4 + 2 + 2, 1, true, filter_row("default"),
-               filter_footprint(4 + 4 + 4 + 2 + 2, false)});
+               filter_footprint(4 + 4 + 4 + 2 + 2, false, false)});
   constexpr double kAllBytes = 4 + 4 + 4 + 4 + 12 + 2 + 2;
   s.push_back({"filters: full set (all 7)", kAllBytes, 1, true, filter_row("all"),
-               filter_footprint(kAllBytes, true)});
+               filter_footprint(kAllBytes, true, true)});
   // The free function re-derives (or checks) what FilterSet prepared once, on every call.
   const FilterSetOptions all = AllFilters();
   s.push_back({"filters: full set, ApplyFilters", kAllBytes, 1, true,
@@ -388,7 +342,7 @@ std::vector<Stage> MakeStages() {
                  ApplyFiltersInto(ws.ready[i % ws.ready.size()], ws.input->rays, all, ws.raised);
                  Sink(ws, ws.raised.data());
                },
-               filter_footprint(kAllBytes, true)});
+               filter_footprint(kAllBytes, true, true)});
   // Smoothing (not in the paper): distance + flags (+ ΔL) in, distance out.
   for (const SpatialFilterKind kind : {SpatialFilterKind::kMedian, SpatialFilterKind::kBilateral}) {
     SpatialFilterOptions so;
@@ -511,7 +465,7 @@ std::vector<Stage> MakeStages() {
                  UncertaintyFilterInto(ws.ready[i % ws.ready.size()], {}, ws.raised);
                  Sink(ws, ws.raised.data());
                },
-               filter_footprint(4 + 4 + 2 + 2, false)});
+               filter_footprint(4 + 4 + 2 + 2, false, true)});
   // The same judging each reading's residual against the neighbours' prediction (made before,
   // not timed here): the prediction's distance and σ read as well.
   s.push_back({"filter: uncertainty with the neighbours' prediction", 4 + 4 + 2 + 2 + 8, 1, true,
@@ -694,16 +648,33 @@ Paired TimeAgainstFloor(std::vector<Workspace>& ws, int threads,
     Sink(w, w.copy.dst());
   };
   for (auto& w : ws) w.copy_bytes = floor_bytes;
-  const std::size_t reps = CalibrateReps(ws, threads, fn, min_time_s);
-  const std::size_t floor_reps = CalibrateReps(ws, threads, copy, min_time_s);
+  // Every batch starts again at repetition 0: a batch of fewer repetitions than frames (or
+  // sources) would touch fewer bytes than the footprint the floor was sized for.
+  const std::size_t frames = ws.front().ready.size(), sources = ws.front().copy.sources();
+  const std::size_t reps = std::max(CalibrateReps(ws, threads, fn, min_time_s), frames);
+  const std::size_t floor_reps = std::max(CalibrateReps(ws, threads, copy, min_time_s), sources);
   auto per_call = [threads](double ns, std::size_t n) {
     return ns / static_cast<double>(n * static_cast<std::size_t>(threads));
+  };
+  auto time_floor = [&](const std::function<void(Workspace&, std::size_t)>& f) {
+    return per_call(RunBatch(ws, threads, f, floor_reps), floor_reps);
   };
   std::vector<double> stage, floor, hot, ratio, hot_ratio;
   for (int b = 0; b < kRounds; ++b) {
     const double ts = per_call(RunBatch(ws, threads, fn, reps), reps);
-    const double tf = per_call(RunBatch(ws, threads, copy, floor_reps), floor_reps);
-    const double th = per_call(RunBatch(ws, threads, hot_copy, floor_reps), floor_reps);
+    // The batch right after the stage runs slower (at 1 MP a few per cent, up to 20 %, on the
+    // Zen 5 of docs/benchmarks.md): the two floors take turns in that place. With one source
+    // they are the same copy, timed once.
+    double tf = 0, th = 0;
+    if (sources == 1) {
+      tf = th = time_floor(copy);
+    } else if (b % 2 == 0) {
+      tf = time_floor(copy);
+      th = time_floor(hot_copy);
+    } else {
+      th = time_floor(hot_copy);
+      tf = time_floor(copy);
+    }
     stage.push_back(ts);
     floor.push_back(tf);
     hot.push_back(th);
@@ -1000,8 +971,9 @@ void RunBench(const BenchOptions& o) {
   report["min_time_s"] = o.min_time_s;
   report["floor"] =
       "memcpy of the stage's minimal traffic (read + write), cycling through memcpy_sources "
-      "sources so that it touches at most the stage's own distinct bytes over the frames "
-      "(footprint_bytes_per_pixel; memcpy_us, ratio_to_memcpy), and from one source again and "
+      "sources, as many as touch at most the stage's own distinct bytes over the frames "
+      "(footprint_bytes_per_pixel; one where the row states none, where one more would pass it, "
+      "or past 256 MiB of sources; memcpy_us, ratio_to_memcpy), and from one source again and "
       "again (memcpy_hot_us, ratio_to_hot_memcpy)";
 
   // Memory bandwidth: a 256 MiB memcpy (read + write counted).
@@ -1217,10 +1189,11 @@ void RunBench(const BenchOptions& o) {
   std::printf(
       "\n2-thread rows: two frames processed concurrently (no stage has a threaded path);\n"
       "time is wall time per frame. memcpy: a copy with the stage's minimal memory "
-      "traffic,\ncycling through as many sources as keep its bytes within the stage's own over "
-      "the frames\n(one, the hot floor, where a row states no footprint);\nratio: median over "
-      "%d rounds of back-to-back batches (stage, memcpy, hot memcpy) of\nstage / memcpy; hot "
-      "ratio: the same against one source copied again and again.\n",
+      "traffic,\ncycling through as many sources (src) as keep its bytes within the stage's own "
+      "over the\nframes (one, the hot floor, where a row states no footprint or a second one "
+      "would pass it);\nratio: median over %d rounds of back-to-back batches (stage, then memcpy "
+      "and hot memcpy\nin turns) of stage / memcpy; hot ratio: the same against one source "
+      "copied again and again.\n",
       kRounds);
   if (!sim_rows.empty()) {
     std::printf(

@@ -1212,6 +1212,16 @@ TEST_F(RunCommandTest, BenchRunsOnlyTheStagesAndSizesAskedFor) {
   }
   EXPECT_EQ(row.at("memcpy_sources").get<int>(), 2) << out;
   EXPECT_DOUBLE_EQ(row.at("footprint_bytes_per_pixel").get<double>(), 15.0) << out;
+  // A row that states no footprint keeps the hot floor: one source.
+  ASSERT_EQ(Run("bench --stage \"point cloud\" --size 160x124 --threads 1 --frames 2 "
+                "--min-time-s 0.01 --json",
+                &out),
+            0)
+      << Stderr();
+  const nlohmann::json cloud_row = nlohmann::json::parse(out).at("stages").at(0);
+  EXPECT_EQ(cloud_row.at("stage").get<std::string>(), "point cloud") << out;
+  EXPECT_EQ(cloud_row.at("memcpy_sources").get<int>(), 1) << out;
+  EXPECT_FALSE(cloud_row.contains("footprint_bytes_per_pixel")) << out;
   const int invalid = ExitStatus(ErrorCode::kInvalidArgument);
   EXPECT_EQ(Run("bench --stage nosuchstage"), invalid);
   EXPECT_NE(Stderr().find("'nosuchstage' matches no stage"), std::string::npos) << Stderr();
