@@ -128,11 +128,12 @@ void RangeInto(const MetricFrame& frame, const RangeOptions& o, Image<PixelFlags
 
 namespace {
 
-// ORs the enabled filters' bits into f. The filters a set leaves out are compiled out
-// (kRange ... kAccuracy), since the frequent sets (the paper's threshold alone, the pipeline's
-// default threshold + saturation) would otherwise pay for every comparison; their bits would be
-// 0 anyway, so every instance gives the generic one's result.
-template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy>
+// ORs the enabled filters' bits into f (kAssign: writes them, for a fresh output). The filters a
+// set leaves out are compiled out (kRange ... kAccuracy), since the frequent sets (the paper's
+// threshold alone, the pipeline's default threshold + saturation, one filter alone) would
+// otherwise pay for every comparison and read every channel; their bits would be 0 anyway, so
+// every instance gives the generic one's result.
+template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy, bool kAssign>
 [[gnu::always_inline]] inline void FusedBody(std::size_t n, const kernels::PixelFilterPlan& l,
                                              const float* __restrict d, const float* __restrict a,
                                              const float* __restrict in, const float* __restrict dl,
@@ -154,23 +155,38 @@ template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy>
     if constexpr (kAccuracy) {
       bits |= static_cast<unsigned>(!((dl[i] >= 0.0f) & (dl[i] <= max_dl))) * db;
     }
-    f[i] |= PixelFlags(static_cast<std::uint16_t>(bits));
+    if constexpr (kAssign) {
+      f[i] = PixelFlags(static_cast<std::uint16_t>(bits));
+    } else {
+      f[i] |= PixelFlags(static_cast<std::uint16_t>(bits));
+    }
   }
 }
 
 // x86-64-v4 clones too: on a Zen 5 the single-filter rows (amplitude, range) at SR-2 went from
 // 9.2 to 6.3 times their memcpy floor (`tofcam bench`, two alternated pairs). Compares and one
-// add, built without contraction: the same flags in every clone.
-#define TOFCAM_FUSED_FILTERS(name, r, a, s, c)                                           \
-  TOFCAM_HOT_LOOP_WIDE void name(std::size_t n, const kernels::PixelFilterPlan& l,       \
-                                 const float* __restrict d, const float* __restrict am,  \
-                                 const float* __restrict in, const float* __restrict dl, \
-                                 PixelFlags* __restrict f) {                             \
-    FusedBody<r, a, s, c>(n, l, d, am, in, dl, f);                                       \
+// add, built without contraction: the same flags in every clone. Each set in two forms: OR into
+// the flags (the fused pass), and written into a fresh output (FilterSet, ApplyFilters: no
+// clearing pass before).
+#define TOFCAM_FUSED_FILTERS(name, r, a, s, c)                                                 \
+  TOFCAM_HOT_LOOP_WIDE void name(std::size_t n, const kernels::PixelFilterPlan& l,             \
+                                 const float* __restrict d, const float* __restrict am,        \
+                                 const float* __restrict in, const float* __restrict dl,       \
+                                 PixelFlags* __restrict f) {                                   \
+    FusedBody<r, a, s, c, false>(n, l, d, am, in, dl, f);                                      \
+  }                                                                                            \
+  TOFCAM_HOT_LOOP_WIDE void name##Into(std::size_t n, const kernels::PixelFilterPlan& l,       \
+                                       const float* __restrict d, const float* __restrict am,  \
+                                       const float* __restrict in, const float* __restrict dl, \
+                                       PixelFlags* __restrict f) {                             \
+    FusedBody<r, a, s, c, true>(n, l, d, am, in, dl, f);                                       \
   }
 TOFCAM_FUSED_FILTERS(FusedAll, true, true, true, true)
 TOFCAM_FUSED_FILTERS(FusedAccuracy, false, false, false, true)
 TOFCAM_FUSED_FILTERS(FusedSaturationAccuracy, false, false, true, true)
+TOFCAM_FUSED_FILTERS(FusedRange, true, false, false, false)
+TOFCAM_FUSED_FILTERS(FusedAmplitude, false, true, false, false)
+TOFCAM_FUSED_FILTERS(FusedSaturation, false, false, true, false)
 #undef TOFCAM_FUSED_FILTERS
 
 const float* ZeroFloats(std::size_t n) {
@@ -179,22 +195,40 @@ const float* ZeroFloats(std::size_t n) {
   return zeros.data();
 }
 
-// n pixels; channels at the span's first pixel, nullptr when absent (read as zeros).
+// n pixels; channels at the span's first pixel, nullptr when absent (read as zeros). `assign`:
+// write the bits (f need not be cleared) rather than OR them in.
 void RunFused(const kernels::PixelFilterPlan& l, std::size_t n, const float* d, const float* a,
-              const float* in, const float* dl, PixelFlags* f) {
+              const float* in, const float* dl, PixelFlags* f, bool assign) {
   // Missing channels read zeros; the plan makes their filters pass (or they are disabled).
   const float* zeros = ZeroFloats(n);
   a = a != nullptr ? a : zeros;
   in = in != nullptr ? in : zeros;
   dl = dl != nullptr ? dl : zeros;
-  const bool others = l.range_bit != 0 || l.amplitude_bit != 0;
-  if (!others && l.saturation_bit == 0 && l.accuracy_bit != 0) {
-    FusedAccuracy(n, l, d, a, in, dl, f);
-  } else if (!others && l.saturation_bit != 0 && l.accuracy_bit != 0) {
-    FusedSaturationAccuracy(n, l, d, a, in, dl, f);
-  } else {
-    FusedAll(n, l, d, a, in, dl, f);
+  using Kernel = void (*)(std::size_t, const kernels::PixelFilterPlan&, const float*, const float*,
+                          const float*, const float*, PixelFlags*);
+  const unsigned set = (l.range_bit != 0 ? 1u : 0u) | (l.amplitude_bit != 0 ? 2u : 0u) |
+                       (l.saturation_bit != 0 ? 4u : 0u) | (l.accuracy_bit != 0 ? 8u : 0u);
+  Kernel k = assign ? FusedAllInto : FusedAll;
+  switch (set) {
+    case 8:
+      k = assign ? FusedAccuracyInto : FusedAccuracy;
+      break;
+    case 4 | 8:
+      k = assign ? FusedSaturationAccuracyInto : FusedSaturationAccuracy;
+      break;
+    case 1:
+      k = assign ? FusedRangeInto : FusedRange;
+      break;
+    case 2:
+      k = assign ? FusedAmplitudeInto : FusedAmplitude;
+      break;
+    case 4:
+      k = assign ? FusedSaturationInto : FusedSaturation;
+      break;
+    default:
+      break;
   }
+  k(n, l, d, a, in, dl, f);
 }
 
 }  // namespace
@@ -238,13 +272,16 @@ PixelFilterPlan PreparePixelFilters(const MetricFrame& frame, const FilterSetOpt
 
 void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
                       const float* i, const float* dl, PixelFlags* raised) {
-  std::fill(raised, raised + n, PixelFlags());
-  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, raised);
+  if (plan.any) {
+    filters_internal::RunFused(plan, n, d, a, i, dl, raised, /*assign=*/true);
+  } else {
+    std::fill(raised, raised + n, PixelFlags());
+  }
 }
 
 void PixelFiltersOrSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
                         const float* i, const float* dl, PixelFlags* flags) {
-  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, flags);
+  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, flags, /*assign=*/false);
 }
 
 }  // namespace kernels

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <string>
 #include <thread>
@@ -175,6 +176,48 @@ TEST(FilterSetTest, OneNeighbourhoodFilterAloneEqualsItsOwnFunction) {
     o.weingarten.min_points = 3;
     EXPECT_EQ(FilterSet(o, s.rays).Process(f), WeingartenCellFilter(f, s.rays, o.weingarten));
     EXPECT_EQ(ApplyFilters(f, s.rays, o), WeingartenCellFilter(f, s.rays, o.weingarten));
+  }
+}
+
+// Each per-pixel filter alone in a set runs its own compiled form (reading only its channels);
+// its flags are the public filter's, also into an output reused from a set that raised others
+// (the set writes every pixel, it does not OR into what was there).
+TEST(FilterSetTest, OnePerPixelFilterAloneEqualsItsOwnFunction) {
+  const test::Scene s = Prepared();
+  FilterSetOptions none;
+  none.accuracy_enabled = none.saturation_enabled = false;
+  for (int k = 0; k < 3; ++k) {
+    const MetricFrame f = Rippled(s, k);
+    Image<PixelFlags> reused(f.width(), f.height());
+    for (std::size_t i = 0; i < reused.size(); ++i) {
+      reused[i] = PixelFlags(static_cast<std::uint16_t>(0xFFFF));
+    }
+    auto check = [&](FilterSetOptions o, const Image<PixelFlags>& want, const char* name) {
+      std::size_t raised = 0;
+      for (std::size_t i = 0; i < want.size(); ++i) raised += want[i].None() ? 0 : 1;
+      ASSERT_GT(raised, 0u) << name << ": the case must raise some pixels";
+      ASSERT_LT(raised, want.size()) << name << ": and keep some";
+      EXPECT_EQ(ApplyFilters(f, s.rays, o), want) << name;
+      const FilterSet set(o, s.rays);
+      set.Process(f, reused);
+      EXPECT_EQ(reused, want) << name << " into a reused output";
+      for (std::size_t i = 0; i < reused.size(); i += 7) {
+        reused[i] = PixelFlags(static_cast<std::uint16_t>(0xFFFF));
+      }
+    };
+    FilterSetOptions o = none;
+    o.range_enabled = true;
+    check(o, RangeFilter(f, o.range), "range");
+    o = none;
+    o.amplitude_enabled = true;
+    o.amplitude.min_amplitude = 400.0;  // raises some pixels of the scene
+    check(o, AmplitudeThresholdFilter(f, o.amplitude), "amplitude");
+    o = none;
+    o.saturation_enabled = true;
+    check(o, SaturationFilter(f, o.saturation), "saturation");
+    o = none;
+    o.accuracy_enabled = true;
+    check(o, AccuracyThresholdFilter(f, o.accuracy), "accuracy");
   }
 }
 
