@@ -604,10 +604,10 @@ struct Row {
   double ratio = 0, ratio_min = 0, ratio_max = 0;
 };
 
-// A stage and its memcpy floors timed in rounds of back-to-back batches (stage, floor, hot floor,
-// stage, ...), so load that comes and goes hits all alike: per round the ratios stage / floor and
-// stage / hot floor. Medians of kRounds rounds, with the minimum and maximum ratio to the floor
-// as the spread.
+// A stage and its memcpy floors timed in rounds of back-to-back batches (stage, floor, hot floor;
+// the floors swap places every other round), so load that comes and goes hits all alike: per
+// round the ratios stage / floor and stage / hot floor. Medians of kRounds rounds, with the
+// minimum and maximum ratio to the floor as the spread.
 struct Paired {
   double stage_ns = 0, stage_min = 0, stage_max = 0, floor_ns = 0;
   double hot_floor_ns = 0, hot_ratio = 0;  // against one source copied again and again
