@@ -298,12 +298,15 @@ std::vector<Stage> MakeStages() {
       {"filter: saturation", "saturation"},       {"filter: range", "range"},
       {"filter: flying pixel", "flying_pixel"},   {"filter: jump edge", "jump_edge"},
       {"filter: Weingarten cells", "weingarten"}};
+  // Channels in, the frame's flags in (2, the neighbourhood filters only: the pixels to ignore),
+  // the output flags out (2). The per-pixel thresholds read no flags; until the fifteenth session
+  // their traffic counted 2 B/px of flags in anyway, a floor a third to a quarter too large.
   const std::map<std::string, double> filter_bytes = {
-      {"accuracy", 4 + 2 + 2},
-      {"amplitude", 4 + 2 + 2},
-      {"saturation", 4 + 4 + 2 + 2},
+      {"accuracy", 4 + 2},
+      {"amplitude", 4 + 2},
+      {"saturation", 4 + 4 + 2},
+      {"range", 4 + 2},
       // The flying-pixel filter reads the amplitude as well as the distance (its contrast test).
-      {"range", 4 + 2 + 2},
       {"flying_pixel", 4 + 4 + 2 + 2},
       {"jump_edge", 4 + 12 + 2 + 2},
       {"weingarten", 4 + 12 + 2 + 2}};
@@ -315,26 +318,24 @@ std::vector<Stage> MakeStages() {
     };
   };
   // Footprints of the filter rows: the output flags (2 B/px) and the ray table (12, jump edge,
-  // cells and the full set) are the same on every call; the channels the row reads are the
-  // frame's. The frame's flags (2) are read only by the neighbourhood filters (as the pixels to
-  // ignore), the full set and the uncertainty; the per-pixel thresholds read channels alone
-  // (their traffic counts 2 B/px of flags in anyway, as it did before the footprints).
-  auto filter_footprint = [](double traffic, bool rays, bool reads_flags) {
+  // cells and the full set) are the same on every call; the rest of the traffic, the channels and
+  // flags the row reads, is the frame's.
+  auto filter_footprint = [](double traffic, bool rays) {
     const double fixed = 2.0 + (rays ? 12.0 : 0.0);
-    return Footprint{traffic - fixed - (reads_flags ? 0.0 : 2.0), fixed};
+    return Footprint{traffic - fixed, fixed};
   };
   for (const auto& [label, key] : filters) {
     const double bytes = filter_bytes.at(key);
     const std::string_view k = key;
-    const bool neighbourhood = k == "flying_pixel" || k == "jump_edge" || k == "weingarten";
     s.push_back({label, bytes, 1, true, filter_row(key),
-                 filter_footprint(bytes, k == "jump_edge" || k == "weingarten", neighbourhood)});
+                 filter_footprint(bytes, k == "jump_edge" || k == "weingarten")});
   }
-  s.push_back({"filters: paper default set", 4 + 4 + 4 + 2 + 2, 1, true, filter_row("default"),
-               filter_footprint(4 + 4 + 4 + 2 + 2, false, false)});
+  // Amplitude, intensity and ΔL in (the saturation and accuracy thresholds), the flags out.
+  s.push_back({"filters: paper default set", 4 + 4 + 4 + 2, 1, true, filter_row("default"),
+               filter_footprint(4 + 4 + 4 + 2, false)});
   constexpr double kAllBytes = 4 + 4 + 4 + 4 + 12 + 2 + 2;
   s.push_back({"filters: full set (all 7)", kAllBytes, 1, true, filter_row("all"),
-               filter_footprint(kAllBytes, true, true)});
+               filter_footprint(kAllBytes, true)});
   // The free function re-derives (or checks) what FilterSet prepared once, on every call.
   const FilterSetOptions all = AllFilters();
   s.push_back({"filters: full set, ApplyFilters", kAllBytes, 1, true,
@@ -342,7 +343,7 @@ std::vector<Stage> MakeStages() {
                  ApplyFiltersInto(ws.ready[i % ws.ready.size()], ws.input->rays, all, ws.raised);
                  Sink(ws, ws.raised.data());
                },
-               filter_footprint(kAllBytes, true, true)});
+               filter_footprint(kAllBytes, true)});
   // Smoothing (not in the paper): distance + flags (+ ΔL) in, distance out.
   for (const SpatialFilterKind kind : {SpatialFilterKind::kMedian, SpatialFilterKind::kBilateral}) {
     SpatialFilterOptions so;
@@ -465,7 +466,7 @@ std::vector<Stage> MakeStages() {
                  UncertaintyFilterInto(ws.ready[i % ws.ready.size()], {}, ws.raised);
                  Sink(ws, ws.raised.data());
                },
-               filter_footprint(4 + 4 + 2 + 2, false, true)});
+               filter_footprint(4 + 4 + 2 + 2, false)});
   // The same judging each reading's residual against the neighbours' prediction (made before,
   // not timed here): the prediction's distance and σ read as well.
   s.push_back({"filter: uncertainty with the neighbours' prediction", 4 + 4 + 2 + 2 + 8, 1, true,
