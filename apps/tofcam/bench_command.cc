@@ -299,8 +299,7 @@ std::vector<Stage> MakeStages() {
       {"filter: flying pixel", "flying_pixel"},   {"filter: jump edge", "jump_edge"},
       {"filter: Weingarten cells", "weingarten"}};
   // Channels in, the frame's flags in (2, the neighbourhood filters only: the pixels to ignore),
-  // the output flags out (2). The per-pixel thresholds read no flags; until the fifteenth session
-  // their traffic counted 2 B/px of flags in anyway, a floor a third to a quarter too large.
+  // the output flags out (2). The per-pixel thresholds read no flags.
   const std::map<std::string, double> filter_bytes = {
       {"accuracy", 4 + 2},
       {"amplitude", 4 + 2},

@@ -128,12 +128,13 @@ void RangeInto(const MetricFrame& frame, const RangeOptions& o, Image<PixelFlags
 
 namespace {
 
-// ORs the enabled filters' bits into f (kAssign: writes them, for a fresh output). The filters a
-// set leaves out are compiled out (kRange ... kAccuracy), since the frequent sets (the paper's
-// threshold alone, the pipeline's default threshold + saturation, one filter alone) would
-// otherwise pay for every comparison and read every channel; their bits would be 0 anyway, so
-// every instance gives the generic one's result.
-template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy, bool kAssign>
+// The enabled filters' bits of each pixel: written into f (kWrite: f may hold anything, every
+// pixel of the span is overwritten) or ORed into it. The filters a set leaves out are compiled
+// out (kRange ... kAccuracy), since the frequent sets (the paper's threshold alone, the
+// pipeline's default threshold + saturation, one filter alone) would otherwise pay for every
+// comparison and read every channel; their bits would be 0 anyway, so every instance gives the
+// generic one's result.
+template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy, bool kWrite>
 [[gnu::always_inline]] inline void FusedBody(std::size_t n, const kernels::PixelFilterPlan& l,
                                              const float* __restrict d, const float* __restrict a,
                                              const float* __restrict in, const float* __restrict dl,
@@ -155,7 +156,7 @@ template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy, bool k
     if constexpr (kAccuracy) {
       bits |= static_cast<unsigned>(!((dl[i] >= 0.0f) & (dl[i] <= max_dl))) * db;
     }
-    if constexpr (kAssign) {
+    if constexpr (kWrite) {
       f[i] = PixelFlags(static_cast<std::uint16_t>(bits));
     } else {
       f[i] |= PixelFlags(static_cast<std::uint16_t>(bits));
@@ -164,29 +165,26 @@ template <bool kRange, bool kAmplitude, bool kSaturation, bool kAccuracy, bool k
 }
 
 // x86-64-v4 clones too: on a Zen 5 the single-filter rows (amplitude, range) at SR-2 went from
-// 9.2 to 6.3 times their memcpy floor (`tofcam bench`, two alternated pairs). Compares and one
-// add, built without contraction: the same flags in every clone. Each set in two forms: OR into
-// the flags (the fused pass), and written into a fresh output (FilterSet, ApplyFilters: no
-// clearing pass before).
-#define TOFCAM_FUSED_FILTERS(name, r, a, s, c)                                                 \
-  TOFCAM_HOT_LOOP_WIDE void name(std::size_t n, const kernels::PixelFilterPlan& l,             \
-                                 const float* __restrict d, const float* __restrict am,        \
-                                 const float* __restrict in, const float* __restrict dl,       \
-                                 PixelFlags* __restrict f) {                                   \
-    FusedBody<r, a, s, c, false>(n, l, d, am, in, dl, f);                                      \
-  }                                                                                            \
-  TOFCAM_HOT_LOOP_WIDE void name##Into(std::size_t n, const kernels::PixelFilterPlan& l,       \
-                                       const float* __restrict d, const float* __restrict am,  \
-                                       const float* __restrict in, const float* __restrict dl, \
-                                       PixelFlags* __restrict f) {                             \
-    FusedBody<r, a, s, c, true>(n, l, d, am, in, dl, f);                                       \
+// 9.2 to 6.3 times their memcpy floor (`tofcam bench`, two alternated pairs), measured when they
+// still ran the form for all four filters; the forms of one filter were not measured against
+// their AVX2 clone. Compares and one add, built without contraction: the same flags in every
+// clone. The write forms serve FilterSet and ApplyFilters; the OR forms the fused pass, which
+// ORs only the paper's threshold (PaperChain) or, generically, any set.
+#define TOFCAM_FUSED_FILTERS(name, r, a, s, c, write)                                    \
+  TOFCAM_HOT_LOOP_WIDE void name(std::size_t n, const kernels::PixelFilterPlan& l,       \
+                                 const float* __restrict d, const float* __restrict am,  \
+                                 const float* __restrict in, const float* __restrict dl, \
+                                 PixelFlags* __restrict f) {                             \
+    FusedBody<r, a, s, c, write>(n, l, d, am, in, dl, f);                                \
   }
-TOFCAM_FUSED_FILTERS(FusedAll, true, true, true, true)
-TOFCAM_FUSED_FILTERS(FusedAccuracy, false, false, false, true)
-TOFCAM_FUSED_FILTERS(FusedSaturationAccuracy, false, false, true, true)
-TOFCAM_FUSED_FILTERS(FusedRange, true, false, false, false)
-TOFCAM_FUSED_FILTERS(FusedAmplitude, false, true, false, false)
-TOFCAM_FUSED_FILTERS(FusedSaturation, false, false, true, false)
+TOFCAM_FUSED_FILTERS(FusedAllOr, true, true, true, true, false)
+TOFCAM_FUSED_FILTERS(FusedAccuracyOr, false, false, false, true, false)
+TOFCAM_FUSED_FILTERS(FusedAllWrite, true, true, true, true, true)
+TOFCAM_FUSED_FILTERS(FusedAccuracyWrite, false, false, false, true, true)
+TOFCAM_FUSED_FILTERS(FusedSaturationAccuracyWrite, false, false, true, true, true)
+TOFCAM_FUSED_FILTERS(FusedRangeWrite, true, false, false, false, true)
+TOFCAM_FUSED_FILTERS(FusedAmplitudeWrite, false, true, false, false, true)
+TOFCAM_FUSED_FILTERS(FusedSaturationWrite, false, false, true, false, true)
 #undef TOFCAM_FUSED_FILTERS
 
 const float* ZeroFloats(std::size_t n) {
@@ -195,38 +193,34 @@ const float* ZeroFloats(std::size_t n) {
   return zeros.data();
 }
 
-// n pixels; channels at the span's first pixel, nullptr when absent (read as zeros). `assign`:
-// write the bits (f need not be cleared) rather than OR them in.
+// n pixels; channels at the span's first pixel, nullptr when absent (read as zeros). `write`:
+// overwrite f with the bits (it need not be cleared) rather than OR them in.
 void RunFused(const kernels::PixelFilterPlan& l, std::size_t n, const float* d, const float* a,
-              const float* in, const float* dl, PixelFlags* f, bool assign) {
+              const float* in, const float* dl, PixelFlags* f, bool write) {
   // Missing channels read zeros; the plan makes their filters pass (or they are disabled).
-  const float* zeros = ZeroFloats(n);
-  a = a != nullptr ? a : zeros;
-  in = in != nullptr ? in : zeros;
-  dl = dl != nullptr ? dl : zeros;
+  if (a == nullptr || in == nullptr || dl == nullptr) {
+    const float* zeros = ZeroFloats(n);
+    a = a != nullptr ? a : zeros;
+    in = in != nullptr ? in : zeros;
+    dl = dl != nullptr ? dl : zeros;
+  }
   using Kernel = void (*)(std::size_t, const kernels::PixelFilterPlan&, const float*, const float*,
                           const float*, const float*, PixelFlags*);
   const unsigned set = (l.range_bit != 0 ? 1u : 0u) | (l.amplitude_bit != 0 ? 2u : 0u) |
                        (l.saturation_bit != 0 ? 4u : 0u) | (l.accuracy_bit != 0 ? 8u : 0u);
-  Kernel k = assign ? FusedAllInto : FusedAll;
-  switch (set) {
-    case 8:
-      k = assign ? FusedAccuracyInto : FusedAccuracy;
-      break;
-    case 4 | 8:
-      k = assign ? FusedSaturationAccuracyInto : FusedSaturationAccuracy;
-      break;
-    case 1:
-      k = assign ? FusedRangeInto : FusedRange;
-      break;
-    case 2:
-      k = assign ? FusedAmplitudeInto : FusedAmplitude;
-      break;
-    case 4:
-      k = assign ? FusedSaturationInto : FusedSaturation;
-      break;
-    default:
-      break;
+  Kernel k = write ? FusedAllWrite : FusedAllOr;
+  if (!write) {
+    if (set == 8) k = FusedAccuracyOr;
+  } else if (set == 8) {
+    k = FusedAccuracyWrite;
+  } else if (set == (4 | 8)) {
+    k = FusedSaturationAccuracyWrite;
+  } else if (set == 1) {
+    k = FusedRangeWrite;
+  } else if (set == 2) {
+    k = FusedAmplitudeWrite;
+  } else if (set == 4) {
+    k = FusedSaturationWrite;
   }
   k(n, l, d, a, in, dl, f);
 }
@@ -273,7 +267,7 @@ PixelFilterPlan PreparePixelFilters(const MetricFrame& frame, const FilterSetOpt
 void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
                       const float* i, const float* dl, PixelFlags* raised) {
   if (plan.any) {
-    filters_internal::RunFused(plan, n, d, a, i, dl, raised, /*assign=*/true);
+    filters_internal::RunFused(plan, n, d, a, i, dl, raised, /*write=*/true);
   } else {
     std::fill(raised, raised + n, PixelFlags());
   }
@@ -281,7 +275,7 @@ void PixelFiltersSpan(const PixelFilterPlan& plan, std::size_t n, const float* d
 
 void PixelFiltersOrSpan(const PixelFilterPlan& plan, std::size_t n, const float* d, const float* a,
                         const float* i, const float* dl, PixelFlags* flags) {
-  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, flags, /*assign=*/false);
+  if (plan.any) filters_internal::RunFused(plan, n, d, a, i, dl, flags, /*write=*/false);
 }
 
 }  // namespace kernels

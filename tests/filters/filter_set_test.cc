@@ -179,45 +179,94 @@ TEST(FilterSetTest, OneNeighbourhoodFilterAloneEqualsItsOwnFunction) {
   }
 }
 
-// Each per-pixel filter alone in a set runs its own compiled form (reading only its channels);
-// its flags are the public filter's, also into an output reused from a set that raised others
-// (the set writes every pixel, it does not OR into what was there).
-TEST(FilterSetTest, OnePerPixelFilterAloneEqualsItsOwnFunction) {
-  const test::Scene s = Prepared();
-  FilterSetOptions none;
-  none.accuracy_enabled = none.saturation_enabled = false;
-  for (int k = 0; k < 3; ++k) {
-    const MetricFrame f = Rippled(s, k);
-    Image<PixelFlags> reused(f.width(), f.height());
-    for (std::size_t i = 0; i < reused.size(); ++i) {
-      reused[i] = PixelFlags(static_cast<std::uint16_t>(0xFFFF));
+// The SR-2 with 157 x 123 pixels (no multiple of 8 or 16: the loops' vector tails run).
+CameraIntrinsics OddSr2() {
+  CameraIntrinsics odd = CameraIntrinsics::SwissRangerSr2();
+  odd.width = 157;
+  odd.height = 123;
+  odd.cx_px = (157 - 1) / 2.0;
+  odd.cy_px = (123 - 1) / 2.0;
+  return odd;
+}
+
+// A frame for the per-pixel thresholds: the scene of an odd size (vector tails), rippled, with
+// pixels at each threshold's edges and non-finite values: amplitude at the saturation limit, the
+// sum of amplitude and intensity at the peak limit, NaN amplitude, intensity and ΔL, a negative
+// ΔL, distances outside the range filter's limits.
+MetricFrame ThresholdFrame(int k, bool with_intensity) {
+  const test::Scene s = test::MakeScene(OddSr2());
+  MetricFrame f = Rippled(s, k);
+  const float nan = std::nanf("");
+  const SaturationOptions sat;
+  const std::size_t n = f.radial_distance_m.size();
+  for (std::size_t i = static_cast<std::size_t>(k); i < n; i += 97) {
+    switch ((i / 97) % 8) {
+      case 0:
+        f.amplitude[i] = static_cast<float>(sat.max_amplitude);
+        break;
+      case 1:  // the sum at the peak limit, each channel below its own
+        f.amplitude[i] = static_cast<float>(sat.max_peak / 2);
+        f.intensity[i] = static_cast<float>(sat.max_peak / 2 + 1);
+        break;
+      case 2:
+        f.amplitude[i] = nan;
+        break;
+      case 3:
+        f.intensity[i] = nan;
+        break;
+      case 4:
+        f.delta_l_m[i] = nan;
+        break;
+      case 5:
+        f.delta_l_m[i] = -0.01f;
+        break;
+      case 6:
+        f.radial_distance_m[i] = 12.0f;
+        break;
+      default:
+        f.amplitude[i] = 50.0f;  // below the amplitude threshold below
+        break;
     }
-    auto check = [&](FilterSetOptions o, const Image<PixelFlags>& want, const char* name) {
-      std::size_t raised = 0;
-      for (std::size_t i = 0; i < want.size(); ++i) raised += want[i].None() ? 0 : 1;
-      ASSERT_GT(raised, 0u) << name << ": the case must raise some pixels";
-      ASSERT_LT(raised, want.size()) << name << ": and keep some";
-      EXPECT_EQ(ApplyFilters(f, s.rays, o), want) << name;
-      const FilterSet set(o, s.rays);
-      set.Process(f, reused);
-      EXPECT_EQ(reused, want) << name << " into a reused output";
-      for (std::size_t i = 0; i < reused.size(); i += 7) {
-        reused[i] = PixelFlags(static_cast<std::uint16_t>(0xFFFF));
+  }
+  if (!with_intensity) f.intensity = Image<float>();
+  return f;
+}
+
+// Each subset of the per-pixel thresholds in a set (the single ones run their own compiled
+// forms, the others the form for all four): its flags are the OR of the public filters', also
+// written into an output reused with every bit set (the set overwrites each pixel, it does not OR
+// into what was there). With and without intensity, on an odd frame size.
+TEST(FilterSetTest, EverySetOfPerPixelFiltersEqualsThePublicFilters) {
+  const RayTable rays = MakeRayTable(OddSr2());
+  for (const bool with_intensity : {true, false}) {
+    for (int k = 0; k < 2; ++k) {
+      const MetricFrame f = ThresholdFrame(k, with_intensity);
+      for (unsigned set = 1; set < 16; ++set) {
+        FilterSetOptions o;
+        o.range_enabled = (set & 1u) != 0;
+        o.amplitude_enabled = (set & 2u) != 0;
+        o.saturation_enabled = (set & 4u) != 0;
+        o.accuracy_enabled = (set & 8u) != 0;
+        o.amplitude.min_amplitude = 400.0;
+        Image<PixelFlags> want(f.width(), f.height());
+        auto merge = [&want](const Image<PixelFlags>& raised) {
+          for (std::size_t i = 0; i < want.size(); ++i) want[i] |= raised[i];
+        };
+        if (o.range_enabled) merge(RangeFilter(f, o.range));
+        if (o.amplitude_enabled) merge(AmplitudeThresholdFilter(f, o.amplitude));
+        if (o.saturation_enabled) merge(SaturationFilter(f, o.saturation));
+        if (o.accuracy_enabled) merge(AccuracyThresholdFilter(f, o.accuracy));
+        std::size_t raised = 0;
+        for (std::size_t i = 0; i < want.size(); ++i) raised += want[i].None() ? 0 : 1;
+        ASSERT_GT(raised, 0u) << "set " << set << ": the frame must raise some pixels";
+        ASSERT_LT(raised, want.size()) << "set " << set << ": and keep some";
+        EXPECT_EQ(ApplyFilters(f, rays, o), want) << "set " << set;
+        Image<PixelFlags> reused(f.width(), f.height(),
+                                 PixelFlags(static_cast<std::uint16_t>(0xFFFF)));
+        FilterSet(o, rays).Process(f, reused);
+        EXPECT_EQ(reused, want) << "set " << set << " into a reused output";
       }
-    };
-    FilterSetOptions o = none;
-    o.range_enabled = true;
-    check(o, RangeFilter(f, o.range), "range");
-    o = none;
-    o.amplitude_enabled = true;
-    o.amplitude.min_amplitude = 400.0;  // raises some pixels of the scene
-    check(o, AmplitudeThresholdFilter(f, o.amplitude), "amplitude");
-    o = none;
-    o.saturation_enabled = true;
-    check(o, SaturationFilter(f, o.saturation), "saturation");
-    o = none;
-    o.accuracy_enabled = true;
-    check(o, AccuracyThresholdFilter(f, o.accuracy), "accuracy");
+    }
   }
 }
 

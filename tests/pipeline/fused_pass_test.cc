@@ -152,6 +152,49 @@ void ExpectSameCloud(const PointCloud& a, const PointCloud& b) {
   ExpectSameBits(a.flags, b.flags, "cloud flags");
 }
 
+// The per-pixel thresholds' two kernel entries agree for every set: ORing into flags that hold
+// other bits gives those bits | what the writing entry writes (the fused pass ORs, FilterSet
+// writes). An odd span length runs the loops' tails; a missing intensity reads as zeros.
+TEST(PixelFilterKernelsTest, OringEqualsWritingThenOring) {
+  test::Scene s = test::MakeScene();
+  MetricFrame& f = s.frame;
+  for (std::size_t i = 0; i < f.radial_distance_m.size(); i += 11) f.amplitude[i] = 300.0f;
+  for (std::size_t i = 5; i < f.radial_distance_m.size(); i += 13) f.delta_l_m[i] = 0.5f;
+  for (std::size_t i = 7; i < f.radial_distance_m.size(); i += 17) f.intensity[i] = 65532.0f;
+  for (std::size_t i = 3; i < f.radial_distance_m.size(); i += 19) f.radial_distance_m[i] = 9.0f;
+  for (std::size_t i = 9; i < f.radial_distance_m.size(); i += 23) f.amplitude[i] = 65532.0f;
+  constexpr std::size_t kSpan = 19'837;  // odd, and short of the frame's 19,840 pixels
+  for (const bool with_intensity : {true, false}) {
+    for (unsigned set = 1; set < 16; ++set) {
+      FilterSetOptions o;
+      o.range_enabled = (set & 1u) != 0;
+      o.amplitude_enabled = (set & 2u) != 0;
+      o.saturation_enabled = (set & 4u) != 0;
+      o.accuracy_enabled = (set & 8u) != 0;
+      o.amplitude.min_amplitude = 400.0;
+      const kernels::PixelFilterPlan plan = kernels::PreparePixelFilters(f, o);
+      const float* in = with_intensity ? f.intensity.data() : nullptr;
+      std::vector<PixelFlags> written(kSpan, PixelFlags(static_cast<std::uint16_t>(0xFFFF)));
+      kernels::PixelFiltersSpan(plan, kSpan, f.radial_distance_m.data(), f.amplitude.data(), in,
+                                f.delta_l_m.data(), written.data());
+      std::vector<PixelFlags> ored(kSpan);
+      for (std::size_t i = 0; i < kSpan; ++i) {
+        ored[i] = PixelFlags(static_cast<std::uint16_t>(i * 2654435761u >> 20));
+      }
+      const std::vector<PixelFlags> prior = ored;
+      kernels::PixelFiltersOrSpan(plan, kSpan, f.radial_distance_m.data(), f.amplitude.data(), in,
+                                  f.delta_l_m.data(), ored.data());
+      std::size_t raised = 0;
+      for (std::size_t i = 0; i < kSpan; ++i) {
+        ASSERT_EQ(ored[i].bits(), (prior[i] | written[i]).bits()) << "set " << set << " at " << i;
+        raised += written[i].None() ? 0 : 1;
+      }
+      EXPECT_GT(raised, 0u) << "set " << set;
+      EXPECT_LT(raised, kSpan) << "set " << set;
+    }
+  }
+}
+
 TEST(PaperChainTest, EqualsTheStagesCalledOneByOne) {
   // Frames without a streamed cloud run whole or in chunks, by CPU (CacheChunkPixels); each is
   // run here in every form: whole, in chunks of kernels::kCacheChunkPixels (1024: 31 x 17 in one
