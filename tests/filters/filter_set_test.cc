@@ -242,12 +242,7 @@ TEST(FilterSetTest, EverySetOfPerPixelFiltersEqualsThePublicFilters) {
     for (int k = 0; k < 2; ++k) {
       const MetricFrame f = ThresholdFrame(k, with_intensity);
       for (unsigned set = 1; set < 16; ++set) {
-        FilterSetOptions o;
-        o.range_enabled = (set & 1u) != 0;
-        o.amplitude_enabled = (set & 2u) != 0;
-        o.saturation_enabled = (set & 4u) != 0;
-        o.accuracy_enabled = (set & 8u) != 0;
-        o.amplitude.min_amplitude = 400.0;
+        const FilterSetOptions o = test::ThresholdSet(set);
         Image<PixelFlags> want(f.width(), f.height());
         auto merge = [&want](const Image<PixelFlags>& raised) {
           for (std::size_t i = 0; i < want.size(); ++i) want[i] |= raised[i];

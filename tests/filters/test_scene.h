@@ -7,6 +7,7 @@
 
 #include "tofcam/core/camera_intrinsics.h"
 #include "tofcam/core/frame.h"
+#include "tofcam/filters/filter_set.h"
 
 namespace tofcam::test {
 
@@ -47,6 +48,18 @@ inline Scene MakeScene(const CameraIntrinsics& k = CameraIntrinsics::SwissRanger
     }
   }
   return s;
+}
+
+// The per-pixel thresholds of subset `set` (bit 0 range, 1 amplitude, 2 saturation, 3 accuracy;
+// no neighbourhood filter), the amplitude threshold at 400 so that the scene's far pixels fail it.
+inline FilterSetOptions ThresholdSet(unsigned set) {
+  FilterSetOptions o;
+  o.range_enabled = (set & 1u) != 0;
+  o.amplitude_enabled = (set & 2u) != 0;
+  o.saturation_enabled = (set & 4u) != 0;
+  o.accuracy_enabled = (set & 8u) != 0;
+  o.amplitude.min_amplitude = 400.0;
+  return o;
 }
 
 }  // namespace tofcam::test

@@ -166,12 +166,7 @@ TEST(PixelFilterKernelsTest, OringEqualsWritingThenOring) {
   constexpr std::size_t kSpan = 19'837;  // odd, and short of the frame's 19,840 pixels
   for (const bool with_intensity : {true, false}) {
     for (unsigned set = 1; set < 16; ++set) {
-      FilterSetOptions o;
-      o.range_enabled = (set & 1u) != 0;
-      o.amplitude_enabled = (set & 2u) != 0;
-      o.saturation_enabled = (set & 4u) != 0;
-      o.accuracy_enabled = (set & 8u) != 0;
-      o.amplitude.min_amplitude = 400.0;
+      const FilterSetOptions o = test::ThresholdSet(set);
       const kernels::PixelFilterPlan plan = kernels::PreparePixelFilters(f, o);
       const float* in = with_intensity ? f.intensity.data() : nullptr;
       std::vector<PixelFlags> written(kSpan, PixelFlags(static_cast<std::uint16_t>(0xFFFF)));
